@@ -1,0 +1,29 @@
+"""hyperstate.suite: sparse meta-RL tasks in the dm_control suite style.
+
+    env = suite.load("cheetah_dir_sparse", seed=0)            # a dm_control control.Environment
+    vec = suite.batch("cheetah_dir_sparse", num_envs=16, seed=0)  # N copies, raw MuJoCo, NumPy in/out
+
+Register your own meta-task from your own module with `@suite.register("name")`.
+"""
+
+from suite import cheetah_dir  # noqa: F401  (registers the built-in tasks)
+from suite._batch import BatchEnv, BatchStep, LoopBatch
+from suite._registry import TASKS, batch, list_tasks, load, register, unregister
+from suite._seeding import as_generator, spawn_seeds
+from suite.base import MetaTask, TaskPrior
+
+__all__ = [
+    "TASKS",
+    "BatchEnv",
+    "BatchStep",
+    "LoopBatch",
+    "MetaTask",
+    "TaskPrior",
+    "as_generator",
+    "batch",
+    "list_tasks",
+    "load",
+    "register",
+    "spawn_seeds",
+    "unregister",
+]
