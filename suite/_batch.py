@@ -105,6 +105,12 @@ class LoopBatch:
         discount = np.array([s.discount for s in steps], dtype=np.float64)
         return BatchStep(observation, reward, discount, last, final)
 
+    def state_dict(self) -> dict:
+        raise NotImplementedError(
+            "LoopBatch cannot snapshot dm_control environments; register a fast batch for this task "
+            "(suite.register(name, batch=...)) to checkpoint and resume training"
+        )
+
     def close(self) -> None:
         for env in self._envs:
             env.close()

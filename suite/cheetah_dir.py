@@ -293,6 +293,26 @@ class CheetahDirectionBatch:
             final = obs
         return BatchStep(obs, reward, np.ones(n), last, final)
 
+    def state_dict(self) -> dict:
+        """Everything needed to continue exactly from here (physics rows, generators, task, belief)."""
+        return {
+            "physics": np.array(self._sim.state, copy=True),
+            "generators": [task.random.bit_generator.state for task in self._tasks],
+            "direction": self._direction.copy(),
+            "belief": self._belief.copy(),
+            "x0": self._x0.copy(),
+            "counters": (self._inner_episode, self._inner_step, self._started),
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self._sim.state[...] = state["physics"]
+        for task, gen_state in zip(self._tasks, state["generators"], strict=True):
+            task.random.bit_generator.state = gen_state
+        self._direction = state["direction"].copy()
+        self._belief = state["belief"].copy()
+        self._x0 = state["x0"].copy()
+        self._inner_episode, self._inner_step, self._started = state["counters"]
+
     def close(self) -> None:
         pass
 

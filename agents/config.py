@@ -1,0 +1,181 @@
+"""Agent configuration: frozen dataclasses whose defaults follow the paper / reference code.
+
+Overrides use dotted names (`"ppo.lr"`, `"vae.latent_dim"`, `"bonuses.0.weight"`) or nested dicts;
+an unknown name is a `ValueError` that lists the valid ones.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+from typing import Any
+
+
+@dataclasses.dataclass(frozen=True)
+class PPOConfig:
+    """PPO hyperparameters (reference: variBAD/HyperX on cheetah-dir)."""
+
+    num_envs: int = 16
+    rollout_length: int = 200  # control steps per env per update; a multiple of the BAMDP length
+    lr: float = 7e-4
+    anneal_lr: bool = True
+    gamma: float = 0.97
+    gae_lambda: float = 0.9
+    clip: float = 0.1
+    epochs: int = 2
+    minibatches: int = 4
+    entropy_coef: float = 1e-4
+    value_coef: float = 0.5
+    max_grad_norm: float = 0.5
+    hidden: tuple[int, ...] = (128, 128)
+    embed: int = 32  # state and belief features are each embedded to this size first (0: no embedding)
+    init_log_std: float = 0.0
+    norm_obs: bool = True
+    norm_reward: bool = True
+    reward_clip: float = 10.0
+
+
+@dataclasses.dataclass(frozen=True)
+class VAEConfig:
+    """variBAD's VAE (Zintgraf et al. 2020, appendix B.2), also the task-supervised belief's encoder."""
+
+    latent_dim: int = 5
+    gru_hidden: int = 128
+    action_embed: int = 16
+    state_embed: int = 32
+    reward_embed: int = 16
+    decoder_hidden: tuple[int, ...] = (64, 32)
+    decode_state: bool = False
+    kl_weight: float = 1.0
+    lr: float = 1e-3
+    buffer_trajectories: int = 1000
+    batch_trajectories: int = 10
+    updates_per_iteration: int = 1
+    subsample_elbos: int = 50  # ELBO timesteps per trajectory per update (0: all)
+    subsample_decodes: int = 50  # decoded timesteps per ELBO term (0: all)
+
+
+@dataclasses.dataclass(frozen=True)
+class RecurrentConfig:
+    """RL²: a GRU over (state, previous action, previous reward, done) inside the policy."""
+
+    hidden: int = 128
+    state_embed: int = 32
+    action_embed: int = 16
+    reward_embed: int = 16
+
+
+@dataclasses.dataclass(frozen=True)
+class BonusConfig:
+    """One exploration bonus. `kind`: rnd | ensemble_rnd | vae_error. `input`: state | belief | hyperstate."""
+
+    kind: str = "rnd"
+    input: str = "hyperstate"
+    state_keys: tuple[str, ...] | None = ("x_displacement",)  # None: every state key
+    weight: float = 10.0  # λ in eq. (4)
+    hidden: tuple[int, ...] = (256, 256)
+    out_dim: int = 128
+    part_embed: int = 64  # the prior embeds each input part (state, belief) separately first
+    prior_scale: float = 10.0
+    lr: float = 1e-4
+    batch_size: int = 128
+    buffer_size: int = 10_000
+    updates_per_iteration: int = 1
+    ensemble_size: int = 1  # B in eq. (8)-(9)
+    beta: float = 1.0
+    aleatoric: float = 0.0  # σ_A² in eq. (8)-(9)
+
+
+@dataclasses.dataclass(frozen=True)
+class AgentConfig:
+    """A whole agent: PPO + one belief + weighted bonuses."""
+
+    belief: str = "none"  # none | recurrent | oracle | varibad | task_supervised
+    ppo: PPOConfig = PPOConfig()
+    vae: VAEConfig = VAEConfig()
+    recurrent: RecurrentConfig = RecurrentConfig()
+    bonuses: tuple[BonusConfig, ...] = ()
+    anneal_bonus: bool = False  # multiply every bonus by 1 - frames / total_frames
+    state_keys: tuple[str, ...] | None = None  # None: every non-privileged observation key
+    torch_threads: int = 1
+    physics_threads: int = 0  # 0: one per CPU
+    checkpoint_every: int = 10  # iterations
+
+
+def to_dict(config: Any) -> Any:
+    """A JSON-ready dict of a config (tuples become lists)."""
+    return dataclasses.asdict(config)
+
+
+def from_dict(cls: type, data: dict) -> Any:
+    """Rebuilds a config from `to_dict` output (lists become tuples)."""
+    return apply_overrides(cls(), data) if cls is not AgentConfig else _agent_from_dict(data)
+
+
+def _agent_from_dict(data: dict) -> AgentConfig:
+    data = dict(data)
+    bonuses = tuple(apply_overrides(BonusConfig(), b) for b in data.pop("bonuses", ()))
+    return apply_overrides(dataclasses.replace(AgentConfig(), bonuses=bonuses), data)
+
+
+def _coerce(value: Any, current: Any, path: str) -> Any:
+    if isinstance(current, tuple) or (current is None and isinstance(value, list)):
+        return tuple(value) if isinstance(value, (list, tuple)) else value
+    if isinstance(current, bool):
+        if not isinstance(value, bool):
+            raise ValueError(f"{path} must be true or false, got {value!r}")
+        return value
+    if isinstance(current, float) and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if current is not None and not isinstance(value, type(current)) and value is not None:
+        raise ValueError(f"{path} must be {type(current).__name__}, got {value!r}")
+    return value
+
+
+def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") -> Any:
+    """Returns `config` with overrides applied (dotted keys or nested dicts)."""
+    nested: dict[str, Any] = {}
+    for key, value in overrides.items():
+        head, _, rest = key.partition(".")
+        if rest:
+            nested.setdefault(head, {})[rest] = value
+        elif isinstance(value, dict):
+            nested.setdefault(head, {}).update(value)
+        else:
+            nested.setdefault(head, {})[""] = value
+    fields = {f.name: f for f in dataclasses.fields(config)}
+    changes = {}
+    for name, sub in nested.items():
+        path = f"{prefix}{name}"
+        if name not in fields:
+            close = difflib.get_close_matches(name, fields, n=3)
+            hint = f" (did you mean {', '.join(prefix + c for c in close)}?)" if close else ""
+            raise ValueError(f"unknown config field {path!r}{hint}; valid: {', '.join(prefix + f for f in fields)}")
+        current = getattr(config, name)
+        direct = sub.pop("", dataclasses.MISSING)
+        if dataclasses.is_dataclass(current):
+            if direct is not dataclasses.MISSING:
+                raise ValueError(f"{path} is a section; set its fields, e.g. {path}.{next(iter(fields))}")
+            changes[name] = apply_overrides(current, sub, prefix=f"{path}.")
+        elif name == "bonuses":
+            changes[name] = _override_bonuses(current, direct, sub, path)
+        else:
+            if sub:
+                raise ValueError(f"{path} has no fields ({', '.join(path + '.' + k for k in sub)})")
+            changes[name] = _coerce(direct, current, path)
+    return dataclasses.replace(config, **changes)
+
+
+def _override_bonuses(current: tuple, direct: Any, sub: dict, path: str) -> tuple:
+    bonuses = list(current)
+    if direct is not dataclasses.MISSING:
+        bonuses = [b if isinstance(b, BonusConfig) else apply_overrides(BonusConfig(), b) for b in direct]
+    per_index: dict[int, dict] = {}
+    for key, value in sub.items():
+        index, _, field = key.partition(".")
+        if not index.isdigit() or int(index) >= len(bonuses):
+            raise ValueError(f"{path}.{key}: bonus index must be 0..{len(bonuses) - 1}")
+        per_index.setdefault(int(index), {})[field] = value
+    for i, fields in per_index.items():
+        bonuses[i] = apply_overrides(bonuses[i], fields, prefix=f"{path}.{i}.")
+    return tuple(bonuses)

@@ -1,0 +1,122 @@
+"""PPO (Schulman et al. 2017) for the batched meta-tasks: actor-critic, GAE, clipped update.
+
+Read top to bottom: `ActorCritic` maps (normalised state, belief features) to a Gaussian policy and a
+value; `compute_gae` turns a rollout into advantages, bootstrapping at truncations; `ppo_update` runs
+the clipped objective over epochs and minibatches. Minibatches are groups of whole env sequences, so
+that a recurrent belief (RL²) can be re-run through time with gradients; the other beliefs hand back
+the features stored in the rollout.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from agents.config import PPOConfig
+from agents.networks import Embed, mlp
+
+
+class ActorCritic(nn.Module):
+    """Separate actor and critic MLPs over embedded state ⊕ embedded belief features."""
+
+    def __init__(self, state_dim: int, feature_dim: int, action_dim: int, config: PPOConfig):
+        super().__init__()
+
+        def trunk(out_dim: int, gain: float) -> nn.ModuleDict:
+            s, f = Embed(state_dim, config.embed), Embed(feature_dim, config.embed)
+            return nn.ModuleDict(
+                {
+                    "state": s,
+                    "features": f,
+                    "body": mlp([s.out_dim + f.out_dim, *config.hidden, out_dim], out_gain=gain),
+                }
+            )
+
+        self.actor = trunk(action_dim, 0.01)
+        self.critic = trunk(1, 1.0)
+        self.log_std = nn.Parameter(torch.full((action_dim,), config.init_log_std))
+
+    @staticmethod
+    def _run(net: nn.ModuleDict, state: torch.Tensor, features: torch.Tensor) -> torch.Tensor:
+        return net["body"](torch.cat([net["state"](state), net["features"](features)], dim=-1))
+
+    def value(self, state: torch.Tensor, features: torch.Tensor) -> torch.Tensor:
+        return self._run(self.critic, state, features)[..., 0]
+
+    def distribution(self, state: torch.Tensor, features: torch.Tensor) -> torch.distributions.Normal:
+        mean = self._run(self.actor, state, features)
+        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))
+
+
+def compute_gae(
+    rewards: np.ndarray,
+    values: np.ndarray,
+    next_values: np.ndarray,
+    lasts: np.ndarray,
+    bootstrap: np.ndarray,
+    gamma: float,
+    lam: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Generalised advantage estimation over (T, N) arrays.
+
+    `next_values[t]` is V(s_{t+1}) (of the final observation where the episode ended at t),
+    `bootstrap[t]` multiplies it: 1 except at terminations (0). Truncated episodes (our BAMDP horizon)
+    bootstrap from V(final observation) and the advantage recursion restarts after every `last`.
+    Returns (advantages, returns).
+    """
+    advantages = np.zeros_like(rewards)
+    running = np.zeros(rewards.shape[1])
+    for t in reversed(range(rewards.shape[0])):
+        delta = rewards[t] + gamma * bootstrap[t] * next_values[t] - values[t]
+        running = delta + gamma * lam * (1.0 - lasts[t]) * running
+        advantages[t] = running
+    return advantages, advantages + values
+
+
+def ppo_update(
+    model: ActorCritic,
+    belief,
+    optimizer: torch.optim.Optimizer,
+    rollout: dict[str, torch.Tensor],
+    config: PPOConfig,
+    generator: torch.Generator,
+) -> dict[str, float]:
+    """Clipped-objective PPO epochs over env-sequence minibatches; returns mean losses."""
+    num_envs = rollout["actions"].shape[1]
+    per_batch = max(1, num_envs // config.minibatches)
+    params = [p for group in optimizer.param_groups for p in group["params"]]
+    stats: dict[str, list[float]] = {
+        "policy_loss": [],
+        "value_loss": [],
+        "entropy": [],
+        "approx_kl": [],
+        "clip_fraction": [],
+    }
+    for _ in range(config.epochs):
+        order = torch.randperm(num_envs, generator=generator)
+        for start in range(0, num_envs, per_batch):
+            idx = order[start : start + per_batch]
+            features = belief.sequence_features(rollout, idx)
+            state = rollout["policy_state"][:, idx]
+            dist = model.distribution(state, features)
+            logp = dist.log_prob(rollout["actions"][:, idx]).sum(-1)
+            log_ratio = logp - rollout["logprobs"][:, idx]
+            ratio = log_ratio.exp()
+            adv = rollout["advantages"][:, idx]
+            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+            policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - config.clip, 1 + config.clip)).mean()
+            value_loss = 0.5 * (model.value(state, features) - rollout["returns"][:, idx]).pow(2).mean()
+            entropy = dist.entropy().sum(-1).mean()
+            loss = policy_loss + config.value_coef * value_loss - config.entropy_coef * entropy
+            optimizer.zero_grad()
+            loss.backward()
+            nn.utils.clip_grad_norm_(params, config.max_grad_norm)
+            optimizer.step()
+            with torch.no_grad():
+                stats["policy_loss"].append(float(policy_loss))
+                stats["value_loss"].append(float(value_loss))
+                stats["entropy"].append(float(entropy))
+                stats["approx_kl"].append(float(((ratio - 1) - log_ratio).mean()))
+                stats["clip_fraction"].append(float(((ratio - 1).abs() > config.clip).float().mean()))
+    return {f"ppo/{k}": float(np.mean(v)) for k, v in stats.items()}
