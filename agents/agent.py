@@ -28,7 +28,7 @@ from agents.beliefs import Trajectories, Transition, make_belief
 from agents.bonuses import BonusInput, make_bonus
 from agents.config import AgentConfig
 from agents.normalization import ReturnScaler, RunningMeanStd
-from agents.ppo import ActorCritic, compute_gae, ppo_update
+from agents.ppo import ActorCritic, compute_gae, gaussian_log_prob, ppo_update
 
 PRIVILEGED_KEYS = ("belief", "task")
 
@@ -129,13 +129,15 @@ class Agent:
 
     @staticmethod
     def _tensors(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
-        return {k: torch.as_tensor(np.asarray(v), dtype=torch.float32) for k, v in obs.items()}
+        # Beliefs read only the privileged keys from observations (the state comes separately).
+        return {k: torch.as_tensor(np.asarray(obs[k]), dtype=torch.float32) for k in PRIVILEGED_KEYS if k in obs}
 
     # Deployment -------------------------------------------------------------------------------------
     def initial_state(self, obs: dict[str, np.ndarray]) -> AgentState:
         """The prior belief for a batch of first observations (the start of a BAMDP episode)."""
         t = self._tensors(obs)
-        return AgentState(self.belief.initial_state(t), torch.zeros(len(next(iter(obs.values()))), self.action_dim))
+        n = len(next(iter(obs.values())))
+        return AgentState(self.belief.initial_state(n, t), torch.zeros(n, self.action_dim))
 
     def act(
         self,
@@ -216,7 +218,7 @@ class Agent:
         first = env.reset()
         carry = {
             "obs": first.observation,
-            "belief": self.belief.initial_state(self._tensors(first.observation)),
+            "belief": self.belief.initial_state(n, self._tensors(first.observation)),
             "is_start": np.ones(n, bool),
             "episode_return": np.zeros(n),
             "chunks": [],
@@ -302,15 +304,16 @@ class Agent:
         tasks_seen = []
         belief_state0 = bstate
         completed = []
-        with torch.no_grad():
+        with torch.inference_mode():
             for _ in range(t_len):
                 raw = self._state_vector(obs)
                 if p.norm_obs:
                     self.obs_stats.update(raw)
                 state = self._normalized(raw)
                 features = self.belief.features(bstate)
-                dist = self.model.distribution(state, features)
-                action = dist.mean + dist.stddev * torch.randn(dist.mean.shape, generator=self.generator)
+                mean, std = self.model.mean_std(state, features)
+                noise = torch.randn(mean.shape, generator=self.generator)
+                action = mean + std * noise
                 value = self.model.value(state, features)
                 out = env.step(action.numpy().astype(np.float64))
                 final = out.final_observation
@@ -339,7 +342,7 @@ class Agent:
                     ("features", features),
                     ("next_features", next_features),
                     ("actions", action),
-                    ("logprobs", dist.log_prob(action).sum(-1)),
+                    ("logprobs", gaussian_log_prob(noise, std)),
                     ("values", value),
                     ("next_values", next_value),
                     ("rewards", reward[:, 0]),

@@ -51,8 +51,8 @@ class Belief(Protocol):
     name: str
     feature_dim: int
 
-    def initial_state(self, obs: dict[str, torch.Tensor]) -> object:
-        """b_0 for a batch of first observations."""
+    def initial_state(self, n: int, obs: dict[str, torch.Tensor]) -> object:
+        """b_0 for a batch of `n` first observations (`obs` holds their privileged keys)."""
 
     def update(self, state: object, transition: Transition) -> object:
         """b_{t+1} from b_t and the transition (a_t, r_t, s_{t+1})."""
@@ -108,8 +108,8 @@ class NoBelief(_Stateless):
     def __init__(self, num_states: int):
         self.feature_dim = 0
 
-    def initial_state(self, obs):
-        return torch.zeros(next(iter(obs.values())).shape[0], 0)
+    def initial_state(self, n, obs):
+        return torch.zeros(n, 0)
 
     def update(self, state, transition):
         return state
@@ -129,7 +129,7 @@ class OracleBelief(_Stateless):
     def __init__(self, belief_dim: int):
         self.feature_dim = belief_dim
 
-    def initial_state(self, obs):
+    def initial_state(self, n, obs):
         return obs["belief"].clone()
 
     def update(self, state, transition):
@@ -170,8 +170,8 @@ class RecurrentBelief:
             dim=-1,
         )
 
-    def initial_state(self, obs):
-        return torch.zeros(next(iter(obs.values())).shape[0], self.config.hidden)
+    def initial_state(self, n, obs):
+        return torch.zeros(n, self.config.hidden)
 
     def update(self, state, transition):
         x = self._input(transition.next_state, transition.action, transition.reward)
@@ -288,8 +288,7 @@ class VariBADBelief:
         return mlp([c.latent_dim + 2 * state_dim + action_dim, *c.decoder_hidden, out], nn.ReLU)
 
     # Online use --------------------------------------------------------------------------------
-    def initial_state(self, obs):
-        n = next(iter(obs.values())).shape[0]
+    def initial_state(self, n, obs):
         zeros = torch.zeros(n, self.config.latent_dim)
         return (torch.zeros(n, self.config.gru_hidden), zeros, zeros.clone())
 
@@ -298,7 +297,7 @@ class VariBADBelief:
             return self.encoder.step(state[0], transition.action, transition.reward, transition.next_state)
 
     def reset_where(self, state, mask, obs):
-        fresh = self.initial_state(obs)
+        fresh = self.initial_state(len(mask), obs)
         return tuple(_where(mask, f, s) for f, s in zip(fresh, state, strict=True))
 
     def features(self, state):
@@ -367,7 +366,7 @@ class VariBADBelief:
         self.optimizer.zero_grad()
         loss.backward()
         self.optimizer.step()
-        return {"vae/reconstruction": float(recon), "vae/kl": float(kl), "vae/loss": float(loss)}
+        return {"vae/reconstruction": recon.item(), "vae/kl": kl.item(), "vae/loss": loss.item()}
 
     def state_dict(self):
         return {"modules": self.modules.state_dict(), "optimizer": self.optimizer.state_dict()}

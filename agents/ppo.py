@@ -9,6 +9,8 @@ the features stored in the rollout.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import torch
 from torch import nn
@@ -45,8 +47,17 @@ class ActorCritic(nn.Module):
         return self._run(self.critic, state, features)[..., 0]
 
     def distribution(self, state: torch.Tensor, features: torch.Tensor) -> torch.distributions.Normal:
+        mean, std = self.mean_std(state, features)
+        return torch.distributions.Normal(mean, std)
+
+    def mean_std(self, state: torch.Tensor, features: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         mean = self._run(self.actor, state, features)
-        return torch.distributions.Normal(mean, self.log_std.exp().expand_as(mean))
+        return mean, self.log_std.exp().expand_as(mean)
+
+
+def gaussian_log_prob(noise: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
+    """log N(mean + std·noise | mean, std), summed over action dimensions (cheaper than Normal)."""
+    return (-0.5 * noise.pow(2) - std.log() - 0.5 * math.log(2 * math.pi)).sum(-1)
 
 
 def compute_gae(

@@ -1,0 +1,206 @@
+"""Unit tests of the agent components against hand computations."""
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+import agents
+from agents.beliefs import RecurrentBelief, Trajectories, Transition, VariBADBelief, gaussian_kl
+from agents.bonuses import BonusInput, EnsembleRND, InputSelector
+from agents.config import BonusConfig, RecurrentConfig, VAEConfig, apply_overrides
+from agents.normalization import ReturnScaler, RunningMeanStd
+from agents.ppo import compute_gae
+
+
+# Normalisation -------------------------------------------------------------------------------------
+def test_running_mean_std_matches_numpy_over_batches():
+    rng = np.random.default_rng(0)
+    data = rng.normal(3.0, 2.0, (1000, 3))
+    stats = RunningMeanStd((3,), epsilon=0.0)
+    for chunk in np.array_split(data, 7):
+        stats.update(chunk)
+    np.testing.assert_allclose(stats.mean, data.mean(0), rtol=1e-10)
+    np.testing.assert_allclose(stats.var, data.var(0), rtol=1e-10)
+    np.testing.assert_allclose(stats.normalize(data).mean(0), 0.0, atol=1e-8)
+
+
+def test_return_scaler_divides_by_std_of_discounted_returns():
+    rewards = np.array([[1.0, 2.0], [0.0, 1.0], [3.0, 0.0]])
+    lasts = np.array([[False, False], [True, False], [False, False]])
+    scaler = ReturnScaler(2, gamma=0.5)
+    scaler.stats = RunningMeanStd(epsilon=0.0)
+    out = scaler.scale(rewards, lasts)
+    # Hand-computed discounted returns, reset after `last`: env0 1, 0.5, 3; env1 2, 2, 1.
+    returns = np.array([1.0, 2.0, 0.5, 2.0, 3.0, 1.0])
+    np.testing.assert_allclose(out, rewards / np.sqrt(returns.var() + 1e-8))
+    np.testing.assert_allclose(scaler.returns, [3.0, 1.0])
+
+
+# GAE -----------------------------------------------------------------------------------------------
+def test_gae_matches_hand_computation_with_truncation():
+    gamma, lam = 0.9, 0.8
+    rewards = np.array([[1.0], [2.0], [3.0]])
+    values = np.array([[0.5], [1.0], [1.5]])
+    # Step 1 ends a truncated episode whose final observation is worth 4; V(s_3) = 2.
+    next_values = np.array([[1.0], [4.0], [2.0]])
+    lasts = np.array([[0.0], [1.0], [0.0]])
+    bootstrap = np.ones((3, 1))
+    adv, ret = compute_gae(rewards, values, next_values, lasts, bootstrap, gamma, lam)
+    d2 = 3.0 + gamma * 2.0 - 1.5
+    d1 = 2.0 + gamma * 4.0 - 1.0  # bootstraps from the final observation, then the recursion restarts
+    d0 = 1.0 + gamma * 1.0 - 0.5
+    want = np.array([[d0 + gamma * lam * d1], [d1], [d2]])
+    np.testing.assert_allclose(adv, want)
+    np.testing.assert_allclose(ret, want + values)
+    # A termination (bootstrap 0) drops the final value.
+    adv_term, _ = compute_gae(rewards, values, next_values, lasts, np.array([[1.0], [0.0], [1.0]]), gamma, lam)
+    assert adv_term[1, 0] == pytest.approx(2.0 - 1.0)
+
+
+# RND and eq. (8)-(9) --------------------------------------------------------------------------------
+def _batch(next_state: torch.Tensor, next_features: torch.Tensor | None = None) -> BonusInput:
+    m = next_state.shape[0]
+    feats = torch.zeros(m, 0) if next_features is None else next_features
+    return BonusInput(torch.zeros(m, 1), torch.zeros(m, 1), torch.zeros(m, 1), next_state, feats, feats)
+
+
+def test_rnd_bonus_falls_on_repeated_inputs_and_stays_high_on_novel_ones():
+    torch.manual_seed(0)
+    config = BonusConfig(input="state", lr=1e-3, updates_per_iteration=50, batch_size=64, buffer_size=2000)
+    rnd = EnsembleRND(InputSelector("state", [0], 0), config, torch.Generator().manual_seed(0), "rnd")
+    seen = _batch(torch.linspace(-1, 1, 200)[:, None])
+    novel = _batch(torch.linspace(4, 6, 200)[:, None])
+    rnd.input_stats.update(np.linspace(-6, 6, 1000)[:, None])  # fixed normalisation for the comparison
+    before_seen = rnd.errors(rnd._normalized(seen.next_state)).mean().item()
+    before_novel = rnd.errors(rnd._normalized(novel.next_state)).mean().item()
+    stats = rnd.input_stats.state_dict()
+    for _ in range(6):
+        rnd.update(seen)
+    rnd.input_stats.load_state_dict(stats)
+    after_seen = rnd.errors(rnd._normalized(seen.next_state)).mean().item()
+    after_novel = rnd.errors(rnd._normalized(novel.next_state)).mean().item()
+    assert after_seen < 0.1 * before_seen
+    assert after_novel > 5 * after_seen
+    assert after_novel > 0.3 * before_novel
+
+
+def test_ensemble_uncertainty_matches_eq_9_by_hand():
+    errors = torch.tensor([[1.0, 0.2, 0.0], [3.0, 0.2, 0.0], [2.0, 0.2, 0.0]])  # B=3 members, 3 inputs
+    got = EnsembleRND.uncertainty(errors, beta=2.0, aleatoric=0.5)
+    # mean 2, var (1+1+0)/3; mean 0.2, var 0; mean 0 → clipped at 0
+    want = torch.tensor([2.0 + 2.0 * 2.0 / 3.0 - 0.5, 0.0, 0.0])
+    torch.testing.assert_close(got, want)
+    got_b1 = EnsembleRND.uncertainty(errors[:1], beta=2.0, aleatoric=0.0)
+    torch.testing.assert_close(got_b1, errors[0])
+
+
+def test_ensemble_rnd_reward_is_eq_9_of_member_errors():
+    torch.manual_seed(1)
+    config = BonusConfig(kind="ensemble_rnd", input="hyperstate", ensemble_size=4, beta=0.5, aleatoric=0.1)
+    rnd = EnsembleRND(InputSelector("hyperstate", [1], 2), config, torch.Generator().manual_seed(0), "e")
+    state = torch.randn(32, 3)
+    belief = torch.softmax(torch.randn(32, 2), -1)
+    bonus = rnd.reward(_batch(state, belief))
+    x = rnd._normalized(torch.cat([state[:, 1:2], belief], -1))
+    e = torch.stack([(g(x) - f(x)).pow(2).mean(-1) for f, g in zip(rnd.priors, rnd.predictors, strict=True)])
+    want = torch.clamp(e.mean(0) + 0.5 * e.var(0, unbiased=False) - 0.1, min=0)
+    torch.testing.assert_close(bonus, want)
+    assert bonus.shape == (32,)
+
+
+def test_input_selector_picks_state_columns_and_belief():
+    batch = _batch(torch.arange(12.0).reshape(4, 3), torch.ones(4, 2))
+    torch.testing.assert_close(InputSelector("state", [2], 2)(batch), torch.tensor([[2.0], [5.0], [8.0], [11.0]]))
+    assert InputSelector("hyperstate", [0, 2], 2)(batch).shape == (4, 4)
+    assert InputSelector("belief", [0], 2)(batch).tolist() == [[1.0, 1.0]] * 4
+    with pytest.raises(ValueError, match="needs a belief"):
+        InputSelector("hyperstate", [0], 0)
+
+
+# Beliefs -------------------------------------------------------------------------------------------
+def test_gaussian_kl_against_closed_form():
+    mq, lq, mp, lp = torch.tensor([[1.0]]), torch.tensor([[0.0]]), torch.tensor([[0.0]]), torch.tensor([[np.log(4.0)]])
+    # KL(N(1,1) || N(0,4)) = log(2) + (1 + 1)/8 - 1/2
+    assert gaussian_kl(mq, lq, mp, lp).item() == pytest.approx(np.log(2) + 2 / 8 - 0.5, rel=1e-6)
+
+
+def _toy_trajectories(b=12, t=20, seed=0):
+    """Reward = task sign × state: a task a VAE can infer from a few transitions."""
+    g = torch.Generator().manual_seed(seed)
+    states = torch.randn(b, t + 1, 3, generator=g)
+    actions = torch.randn(b, t, 2, generator=g)
+    task = torch.where(torch.rand(b, generator=g) < 0.5, -1.0, 1.0)
+    rewards = (task[:, None] * states[:, 1:, 0])[..., None]
+    return Trajectories(states, actions, rewards, task[:, None])
+
+
+def test_vae_elbo_decreases_on_fixed_batch():
+    torch.manual_seed(0)
+    config = VAEConfig(subsample_elbos=0, subsample_decodes=0, lr=3e-3)
+    vae = VariBADBelief(3, 2, config, torch.Generator().manual_seed(0))
+    batch = _toy_trajectories()
+    first = vae.train_step(batch)["vae/loss"]
+    for _ in range(150):
+        last = vae.train_step(batch)["vae/loss"]
+    assert last < 0.3 * first
+
+
+def test_vae_online_posterior_equals_sequence_posterior():
+    torch.manual_seed(0)
+    vae = VariBADBelief(3, 2, VAEConfig(), torch.Generator().manual_seed(0))
+    batch = _toy_trajectories(b=4, t=6)
+    mean, logvar = vae.encoder.sequence(batch.actions, batch.rewards, batch.states[:, 1:])
+    state = vae.initial_state(4, {})
+    torch.testing.assert_close(vae.features(state), torch.zeros(4, 10))  # N(0, I) prior
+    for t in range(6):
+        state = vae.update(state, Transition(batch.actions[:, t], batch.rewards[:, t], batch.states[:, t + 1], {}))
+        torch.testing.assert_close(vae.features(state), torch.cat([mean[:, t + 1], logvar[:, t + 1]], -1))
+
+
+def test_recurrent_sequence_features_equal_online_features_across_resets():
+    torch.manual_seed(0)
+    rl2 = RecurrentBelief(3, 2, RecurrentConfig(hidden=8))
+    t_len, n = 7, 3
+    next_state, actions, rewards = torch.randn(t_len, n, 3), torch.randn(t_len, n, 2), torch.randn(t_len, n)
+    starts = torch.zeros(t_len, n, dtype=torch.bool)
+    starts[4] = True  # a new BAMDP episode begins at step 4
+    h0 = torch.randn(n, 8)
+    online, h = [], h0
+    for t in range(t_len):
+        if starts[t, 0]:
+            h = rl2.reset_where(h, starts[t], {})
+        online.append(rl2.features(h))
+        h = rl2.update(h, Transition(actions[t], rewards[t, :, None], next_state[t], {}))
+    rollout = {"belief_state0": h0, "next_state": next_state, "actions": actions, "rewards": rewards, "starts": starts}
+    recomputed = rl2.sequence_features(rollout, torch.tensor([2, 0]))
+    torch.testing.assert_close(recomputed, torch.stack(online)[:, [2, 0]])
+    assert recomputed.requires_grad
+
+
+# Configs -------------------------------------------------------------------------------------------
+def test_overrides_map_onto_dataclasses_and_reject_unknown_fields():
+    config = apply_overrides(agents.get_preset("hyperx"), {"ppo.lr": 1e-3, "bonuses.1.weight": 3, "vae": {"lr": 5e-4}})
+    assert config.ppo.lr == 1e-3 and config.vae.lr == 5e-4
+    assert config.bonuses[1].weight == 3.0 and config.bonuses[0].weight == 10.0
+    assert dataclasses.is_dataclass(config) and config.belief == "varibad"
+    with pytest.raises(ValueError, match=r"unknown config field 'ppo.lrr' \(did you mean ppo.lr\?\)"):
+        apply_overrides(config, {"ppo.lrr": 1.0})
+    with pytest.raises(ValueError, match="unknown config field 'beleif'"):
+        agents.make("oracle", beleif="varibad")
+    with pytest.raises(ValueError, match="ppo.num_envs must be int"):
+        agents.make("oracle", **{"ppo.num_envs": "8"})
+    with pytest.raises(ValueError, match="bonus index"):
+        apply_overrides(config, {"bonuses.5.weight": 1.0})
+    with pytest.raises(ValueError, match="unknown agent preset 'hyperz'.*hyperx"):
+        agents.make("hyperz")
+
+
+def test_presets_cover_figure_2():
+    want = {"ppo", "rl2", "oracle", "oracle_rh", "oracle_rs", "varibad", "varibad_rh", "hyperx", "oracle_ensemble_rh"}
+    assert want <= set(agents.list_presets())
+    hyperx = agents.get_preset("hyperx")
+    assert [b.input for b in hyperx.bonuses] == ["hyperstate", "state"]
+    assert [b.weight for b in hyperx.bonuses] == [10.0, 10.0]
+    assert agents.get_preset("oracle_ensemble_rh").bonuses[0].ensemble_size > 1

@@ -1,0 +1,171 @@
+"""Training-level tests: every preset runs, determinism, checkpoint/resume, deployment, learning."""
+
+import numpy as np
+import pytest
+import torch
+
+import agents
+import suite
+from agents.beliefs import make_belief
+
+TINY = {
+    "ppo.num_envs": 4,
+    "ppo.rollout_length": 50,
+    "vae.batch_trajectories": 2,
+    "vae.subsample_elbos": 10,
+    "vae.subsample_decodes": 10,
+}
+TINY_TASK = {"episode_length": 25, "episodes_per_task": 2}  # BAMDP episodes of 50 steps
+
+
+def _params(agent) -> list[torch.Tensor]:
+    tensors = [p.detach().clone() for p in agent.model.parameters()]
+    modules = getattr(agent.belief, "modules", None)
+    if modules is not None:
+        tensors += [p.detach().clone() for p in modules.parameters()]
+    for bonus in agent.bonuses:
+        predictors = getattr(bonus, "predictors", None)
+        if predictors is not None:
+            tensors += [p.detach().clone() for p in predictors.parameters()]
+    return tensors
+
+
+@pytest.mark.parametrize("preset", agents.list_presets())
+def test_every_preset_trains_and_deploys(preset, tmp_path):
+    agent = agents.make(preset, **TINY)
+    log = agent.train("cheetah_dir_sparse", frames=400, seed=1, task_kwargs=TINY_TASK, progress=False)
+    assert [entry["frames"] for entry in log] == [200, 400]
+    assert all(np.isfinite(entry["ppo/value_loss"]) for entry in log)
+    # Deploy over one BAMDP episode in the dm_control environment, from the prior belief.
+    env = suite.load("cheetah_dir_sparse", seed=0, privileged=True, **TINY_TASK)
+    step, state, total = env.reset(), None, 0.0
+    while not step.last():
+        obs = {k: v[None] for k, v in step.observation.items()}
+        action, state = agent.act(obs, state, reward=None if state is None else np.array([step.reward]))
+        assert action.shape == (1, 6)
+        step = env.step(action[0])
+        total += step.reward
+    assert np.isfinite(total)
+    # save → load gives the same deterministic actions.
+    agent.save(tmp_path / "agent.pt")
+    loaded = agents.Agent.load(tmp_path / "agent.pt")
+    obs = {k: np.stack([v, v]) for k, v in env.reset().observation.items()}
+    np.testing.assert_array_equal(agent.act(obs)[0], loaded.act(obs)[0])
+
+
+def test_bonus_logs_and_belief_training_happen():
+    agent = agents.make("hyperx", **TINY)
+    log = agent.train("cheetah_dir_sparse", frames=400, seed=0, task_kwargs=TINY_TASK, progress=False)
+    assert {"bonus/0_rnd_hyperstate/raw_mean", "bonus/1_rnd_state/raw_mean", "vae/loss"} <= set(log[-1])
+    assert log[-1]["bonus/0_rnd_hyperstate/raw_mean"] > 0
+
+
+def test_same_seed_same_numbers_different_seed_different():
+    runs = []
+    for seed in (3, 3, 4):
+        agent = agents.make("varibad_rh", **TINY)
+        log = agent.train("cheetah_dir_sparse", frames=400, seed=seed, task_kwargs=TINY_TASK, progress=False)
+        runs.append((_params(agent), [entry["ppo/policy_loss"] for entry in log]))
+    for a, b in zip(runs[0][0], runs[1][0], strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+    assert runs[0][1] == runs[1][1]
+    assert runs[0][1] != runs[2][1]
+
+
+@pytest.mark.parametrize("preset", ["hyperx", "rl2"])
+def test_resume_from_checkpoint_equals_uninterrupted_run(preset, tmp_path):
+    config = {**TINY, "checkpoint_every": 1}
+    # A BAMDP episode (50 steps) spans two rollouts of 25 steps, so the checkpoint falls mid-episode.
+    config["ppo.rollout_length"] = 25
+    whole = agents.make(preset, **config)
+    whole_log = whole.train("cheetah_dir_sparse", frames=500, seed=2, task_kwargs=TINY_TASK, progress=False)
+
+    first = agents.make(preset, **config)
+    first.train(
+        "cheetah_dir_sparse",
+        frames=500,
+        seed=2,
+        task_kwargs=TINY_TASK,
+        progress=False,
+        checkpoint_dir=tmp_path,
+        stop_after_iterations=3,
+    )
+    second = agents.make(preset, **config)
+    resumed_log = second.train(
+        "cheetah_dir_sparse",
+        frames=500,
+        seed=2,
+        task_kwargs=TINY_TASK,
+        progress=False,
+        checkpoint_dir=tmp_path,
+        resume=True,
+    )
+    for a, b in zip(_params(whole), _params(second), strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+    drop = ("wall_seconds", "fps", "collect_fps")
+    assert [{k: v for k, v in e.items() if k not in drop} for e in whole_log] == [
+        {k: v for k, v in e.items() if k not in drop} for e in resumed_log
+    ]
+
+
+def test_resume_refuses_a_checkpoint_from_another_run(tmp_path):
+    agent = agents.make("oracle", **TINY)
+    agent.train(
+        "cheetah_dir_sparse", frames=200, seed=0, task_kwargs=TINY_TASK, progress=False, checkpoint_dir=tmp_path
+    )
+    other = agents.make("oracle", **{**TINY, "ppo.lr": 1e-3})
+    with pytest.raises(ValueError, match="different run"):
+        other.train(
+            "cheetah_dir_sparse",
+            frames=200,
+            seed=0,
+            task_kwargs=TINY_TASK,
+            progress=False,
+            checkpoint_dir=tmp_path,
+            resume=True,
+        )
+
+
+def test_clear_errors():
+    with pytest.raises(ValueError, match="oracle belief needs"):
+        make_belief("oracle", state_dim=1, action_dim=1, obs_spec={}, vae=None, recurrent=None, generator=None)
+    with pytest.raises(ValueError, match="frames must be positive"):
+        agents.make("ppo").train("cheetah_dir", frames=0)
+    with pytest.raises(ValueError, match="state key 'x_pos' is not an observation"):
+        agents.make("ppo", state_keys=["x_pos"], **TINY).train("cheetah_dir", frames=200, progress=False)
+    with pytest.raises(ValueError, match="privileged"):
+        agents.make("ppo", state_keys=["belief"], **TINY).train("cheetah_dir", frames=200, progress=False)
+    with pytest.raises(RuntimeError, match="train\\(\\) or load\\(\\)"):
+        agents.make("ppo").act({"position": np.zeros((1, 8))})
+
+
+def test_oracle_learns_dense_cheetah_dir():
+    """Small budget, easy setting: the dense task rewards running the right way from the first step."""
+    agent = agents.make("oracle")
+    log = agent.train("cheetah_dir", frames=192_000, seed=0, progress=False)
+    returns = [entry["train_return"] for entry in log]
+    assert np.mean(returns[-5:]) > np.mean(returns[:5]) + 40.0
+
+
+def test_state_bonus_widens_x_visitation_on_the_sparse_task():
+    """Pseudo-exploration: RND on the x-position pushes meta-training rollouts further from the start."""
+
+    def visitation(preset: str) -> tuple[float, float]:
+        per_iteration = []
+
+        def record(obs):
+            x = obs["x_displacement"][..., 0]  # (T, N)
+            per_iteration.append((np.abs(x).max(axis=0).mean(), np.abs(x).max()))
+
+        # More predictor updates than the reference's one per iteration: the budget here is tiny.
+        overrides = {} if preset == "oracle" else {"bonuses.0.updates_per_iteration": 32}
+        agent = agents.make(preset, **overrides)
+        agent.train("cheetah_dir_sparse", frames=160_000, seed=0, progress=False, on_rollout=record)
+        spread = np.array(per_iteration)
+        return float(spread[-10:, 0].mean()), float(spread[:, 1].max())
+
+    plain_late, plain_max = visitation("oracle")
+    bonus_late, bonus_max = visitation("oracle_rs")
+    print(f"late mean max|x|: plain {plain_late:.2f}, bonus {bonus_late:.2f}; max: {plain_max:.2f}, {bonus_max:.2f}")
+    assert bonus_late > 1.2 * plain_late
+    assert bonus_max > plain_max + 1.0
