@@ -41,6 +41,32 @@ class AgentState:
     prev_action: torch.Tensor
 
 
+def combine_rewards(
+    extrinsic: np.ndarray,
+    bonuses: list[np.ndarray],
+    *,
+    weights: list[float],
+    anneal: float,
+    lasts: np.ndarray,
+    ext_scaler: ReturnScaler | None,
+    bonus_scalers: list[ReturnScaler],
+    reward_clip: float,
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Eq. (4): r + Σ_i λ_i r_i, each stream divided by the std of its own running discounted return.
+
+    The extrinsic stream is normalised and clipped to ±`reward_clip` (unless `ext_scaler` is None);
+    the bonuses are normalised, weighted and multiplied by `anneal` (1 − progress when annealing).
+    Returns the combined (T, N) reward and the normalised bonuses.
+    """
+    reward = extrinsic
+    if ext_scaler is not None:
+        reward = np.clip(ext_scaler.scale(extrinsic, lasts), -reward_clip, reward_clip)
+    scaled = [scaler.scale(b, lasts) for b, scaler in zip(bonuses, bonus_scalers, strict=True)]
+    for weight, b in zip(weights, scaled, strict=True):
+        reward = reward + anneal * weight * b
+    return reward, scaled
+
+
 class TrajectoryBuffer:
     """Whole BAMDP episodes for belief training (FIFO, `capacity` trajectories)."""
 
@@ -377,9 +403,7 @@ class Agent:
         lasts = rollout["lasts"].numpy().astype(bool)
         extrinsic = rollout["rewards"].numpy().astype(np.float64)
         log: dict[str, Any] = {"reward/extrinsic_mean": float(extrinsic.mean())}
-        reward = extrinsic
-        if p.norm_reward:
-            reward = np.clip(ext_scaler.scale(extrinsic, lasts), -p.reward_clip, p.reward_clip)
+        raw_bonuses = []
         if self.bonuses:
             flat = BonusInput(
                 state=rollout["state"].reshape(t_len * n, -1),
@@ -389,14 +413,22 @@ class Agent:
                 features=rollout["features"].reshape(t_len * n, -1),
                 next_features=rollout["next_features"].reshape(t_len * n, -1),
             )
-            anneal = 1.0 - iteration / iterations if cfg.anneal_bonus else 1.0
-            for bonus, bcfg, scaler in zip(self.bonuses, cfg.bonuses, bonus_scalers, strict=True):
-                raw = bonus.reward(flat).numpy().astype(np.float64).reshape(t_len, n)
-                scaled = scaler.scale(raw, lasts)
-                reward = reward + anneal * bcfg.weight * scaled
-                log[f"bonus/{bonus.name}/raw_mean"] = float(raw.mean())
-                log[f"bonus/{bonus.name}/scaled_mean"] = float(scaled.mean())
+            for bonus in self.bonuses:
+                raw_bonuses.append(bonus.reward(flat).numpy().astype(np.float64).reshape(t_len, n))
                 log.update(bonus.update(flat))
+        reward, scaled_bonuses = combine_rewards(
+            extrinsic,
+            raw_bonuses,
+            weights=[b.weight for b in cfg.bonuses],
+            anneal=1.0 - iteration / iterations if cfg.anneal_bonus else 1.0,
+            lasts=lasts,
+            ext_scaler=ext_scaler if p.norm_reward else None,
+            bonus_scalers=bonus_scalers,
+            reward_clip=p.reward_clip,
+        )
+        for bonus, raw, scaled in zip(self.bonuses, raw_bonuses, scaled_bonuses, strict=True):
+            log[f"bonus/{bonus.name}/raw_mean"] = float(raw.mean())
+            log[f"bonus/{bonus.name}/scaled_mean"] = float(scaled.mean())
         advantages, returns = compute_gae(
             reward,
             rollout["values"].numpy(),

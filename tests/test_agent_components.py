@@ -204,3 +204,59 @@ def test_presets_cover_figure_2():
     assert [b.input for b in hyperx.bonuses] == ["hyperstate", "state"]
     assert [b.weight for b in hyperx.bonuses] == [10.0, 10.0]
     assert agents.get_preset("oracle_ensemble_rh").bonuses[0].ensemble_size > 1
+
+
+# Reward combination, eq. (4) ------------------------------------------------------------------------
+def test_combine_rewards_normalises_each_stream_weights_and_anneals():
+    from agents.agent import combine_rewards
+
+    rng = np.random.default_rng(0)
+    extrinsic, b1, b2 = rng.normal(0, 30, (5, 3)), rng.random((5, 3)), 100 * rng.random((5, 3))
+    lasts = np.zeros((5, 3), bool)
+    scalers = [ReturnScaler(3, 0.9) for _ in range(3)]
+    reward, scaled = combine_rewards(
+        extrinsic,
+        [b1, b2],
+        weights=[10.0, 2.0],
+        anneal=0.25,
+        lasts=lasts,
+        ext_scaler=scalers[0],
+        bonus_scalers=scalers[1:],
+        reward_clip=1.0,
+    )
+
+    def by_hand(r):
+        returns, acc = [], np.zeros(3)
+        for t in range(5):
+            acc = 0.9 * acc + r[t]
+            returns.append(acc.copy())
+        return r / np.sqrt(np.var(returns) * 5 * 3 / (5 * 3 + 1e-4) + 1e-8)
+
+    ext = np.clip(by_hand(extrinsic), -1.0, 1.0)
+    np.testing.assert_allclose(scaled[0], by_hand(b1), rtol=1e-3)
+    np.testing.assert_allclose(scaled[1], by_hand(b2), rtol=1e-3)
+    np.testing.assert_allclose(reward, ext + 0.25 * (10.0 * scaled[0] + 2.0 * scaled[1]), rtol=1e-3)
+    assert np.abs(ext).max() == 1.0  # extrinsic clipped
+    # Scale-free: a bonus 100x larger contributes the same after normalisation.
+    assert np.abs(scaled[1]).mean() < 10 * np.abs(scaled[0]).mean()
+
+
+def test_vae_error_bonus_is_the_reward_decoders_squared_error():
+    from agents.bonuses import VAEErrorBonus
+
+    torch.manual_seed(0)
+    gen = torch.Generator().manual_seed(7)
+    vae = VariBADBelief(3, 2, VAEConfig(), gen)
+    bonus = VAEErrorBonus(vae, "vae_error")
+    m = 16
+    features = torch.cat([torch.randn(m, 5), torch.full((m, 5), -2.0)], -1)
+    state, action, next_state, reward = torch.randn(m, 3), torch.randn(m, 2), torch.randn(m, 3), torch.randn(m, 1)
+    batch = BonusInput(state, action, reward, next_state, features, features)
+    before = gen.get_state()
+    got = bonus.reward(batch)
+    gen.set_state(before)
+    z = features[:, :5] + torch.randn(m, 5, generator=gen) * torch.exp(0.5 * features[:, 5:])
+    want = (vae.decoder(torch.cat([z, state, action, next_state], -1))[:, :1] - reward).pow(2)[:, 0]
+    torch.testing.assert_close(got, want.detach())
+    with pytest.raises(ValueError, match="varibad"):
+        VAEErrorBonus(RecurrentBelief(3, 2, RecurrentConfig()), "x")

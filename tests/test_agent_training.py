@@ -58,6 +58,12 @@ def test_bonus_logs_and_belief_training_happen():
     log = agent.train("cheetah_dir_sparse", frames=400, seed=0, task_kwargs=TINY_TASK, progress=False)
     assert {"bonus/0_rnd_hyperstate/raw_mean", "bonus/1_rnd_state/raw_mean", "vae/loss"} <= set(log[-1])
     assert log[-1]["bonus/0_rnd_hyperstate/raw_mean"] > 0
+    # A bonus assembled from config: variBAD's reconstruction error, annealed.
+    agent = agents.make(
+        "varibad", bonuses=[{"kind": "vae_error", "input": "belief", "weight": 1.0}], anneal_bonus=True, **TINY
+    )
+    log = agent.train("cheetah_dir_sparse", frames=400, seed=0, task_kwargs=TINY_TASK, progress=False)
+    assert log[-1]["bonus/0_vae_error_belief/raw_mean"] > 0
 
 
 def test_same_seed_same_numbers_different_seed_different():
