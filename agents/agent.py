@@ -237,6 +237,7 @@ class Agent:
         ext_scaler = ReturnScaler(n, p.gamma)
         bonus_scalers = [ReturnScaler(n, p.gamma) for _ in self.bonuses]
         trainable_belief = self.config.belief in ("varibad", "task_supervised")
+        self._episode_chunks: list[dict] = []  # the unfinished BAMDP episode, for the trajectory buffer
         buffer = TrajectoryBuffer(cfg.vae.buffer_trajectories)
         history: list[dict] = []
         ckpt = Path(checkpoint_dir) / "checkpoint.pt" if checkpoint_dir else None
@@ -247,7 +248,6 @@ class Agent:
             "belief": self.belief.initial_state(n, self._tensors(first.observation)),
             "is_start": np.ones(n, bool),
             "episode_return": np.zeros(n),
-            "chunks": [],
         }
         start_iteration, elapsed = 0, 0.0
         if resume and ckpt is not None and ckpt.exists():
@@ -388,13 +388,7 @@ class Agent:
         rollout["belief_state0"] = belief_state0
         rollout["raw_obs"] = {k: np.stack(v) for k, v in raw_obs.items()}
         rollout["tasks"] = None if tasks_seen[0] is None else np.stack(tasks_seen)
-        new_carry = {
-            "obs": obs,
-            "belief": bstate,
-            "is_start": is_start,
-            "episode_return": episode_return,
-            "chunks": carry["chunks"],
-        }
+        new_carry = {"obs": obs, "belief": bstate, "is_start": is_start, "episode_return": episode_return}
         return rollout, new_carry, completed
 
     def _learn(self, rollout, iteration, iterations, ext_scaler, bonus_scalers, buffer, trainable_belief) -> dict:
@@ -463,7 +457,7 @@ class Agent:
         }
         tasks = rollout["tasks"]
         start = 0
-        chunks = self._chunks
+        chunks = self._episode_chunks
         for t in np.flatnonzero(lasts[:, 0]):
             chunks.append({k: v[start : t + 1] for k, v in pieces.items()})
             whole = {k: np.concatenate([c[k] for c in chunks]) for k in pieces}
@@ -473,12 +467,6 @@ class Agent:
             start = t + 1
         if start < lasts.shape[0]:
             chunks.append({k: v[start:] for k, v in pieces.items()})
-
-    @property
-    def _chunks(self) -> list:
-        if not hasattr(self, "_episode_chunks"):
-            self._episode_chunks = []
-        return self._episode_chunks
 
     # Checkpoints --------------------------------------------------------------------------------------
     def _modules_state(self) -> dict:
@@ -507,7 +495,8 @@ class Agent:
             "modules": self._modules_state(),
             "optimizer": self.optimizer.state_dict(),
             "env": env.state_dict(),
-            "carry": {**carry, "chunks": list(self._chunks)},
+            "carry": carry,
+            "episode_chunks": list(self._episode_chunks),
             "history": history,
             "ext_scaler": ext_scaler.state_dict(),
             "bonus_scalers": [s.state_dict() for s in bonus_scalers],
@@ -528,7 +517,7 @@ class Agent:
         for s, st in zip(bonus_scalers, saved["bonus_scalers"], strict=True):
             s.load_state_dict(st)
         buffer.items = list(saved["buffer"])
-        self._episode_chunks = list(saved["carry"]["chunks"])
+        self._episode_chunks = list(saved["episode_chunks"])
         self.generator.set_state(saved["generator"])
         torch.set_rng_state(saved["torch_rng"])
 
