@@ -9,6 +9,7 @@ from a prior at the start of each BAMDP episode and is updated with each transit
 - `recurrent`: RL²; a GRU trained by the RL loss through time.
 - `varibad`: variBAD's VAE; the policy sees the posterior (mean, logvar), detached.
 - `task_supervised`: the same encoder trained to predict the true task parameters (Humplik et al. 2019).
+- `task_aware`: the true task parameters (privileged): the reference policy that knows the task.
 """
 
 from __future__ import annotations
@@ -122,21 +123,24 @@ class NoBelief(_Stateless):
 
 
 class OracleBelief(_Stateless):
-    """The exact belief, read from the task's privileged `belief` observation."""
+    """The exact belief, read from the task's privileged `belief` observation.
 
-    name = "oracle"
+    With `key="task"` it hands over the true task instead: the task-aware reference policy.
+    """
 
-    def __init__(self, belief_dim: int):
-        self.feature_dim = belief_dim
+    def __init__(self, dim: int, key: str = "belief", name: str = "oracle"):
+        self.feature_dim = dim
+        self.key = key
+        self.name = name
 
     def initial_state(self, n, obs):
-        return obs["belief"].clone()
+        return obs[self.key].clone()
 
     def update(self, state, transition):
-        return transition.next_obs["belief"].clone()
+        return transition.next_obs[self.key].clone()
 
     def reset_where(self, state, mask, obs):
-        return _where(mask, obs["belief"], state)
+        return _where(mask, obs[self.key], state)
 
     def features(self, state):
         return state
@@ -405,7 +409,7 @@ class TaskSupervisedBelief(VariBADBelief):
         raise NotImplementedError("task_supervised has no reward decoder; use the vae_error bonus with varibad")
 
 
-BELIEFS = ("none", "recurrent", "oracle", "varibad", "task_supervised")
+BELIEFS = ("none", "recurrent", "oracle", "varibad", "task_supervised", "task_aware")
 
 
 def make_belief(
@@ -425,6 +429,10 @@ def make_belief(
         if "belief" not in obs_spec:
             raise ValueError("the oracle belief needs a task with an exact belief (privileged `belief` observation)")
         return OracleBelief(int(np.prod(obs_spec["belief"].shape)))
+    if name == "task_aware":
+        if "task" not in obs_spec:
+            raise ValueError("task_aware needs the task's privileged `task` observation")
+        return OracleBelief(int(np.prod(obs_spec["task"].shape)), key="task", name="task_aware")
     if name == "recurrent":
         return RecurrentBelief(state_dim, action_dim, recurrent)
     if name == "varibad":

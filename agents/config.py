@@ -90,7 +90,7 @@ class BonusConfig:
 class AgentConfig:
     """A whole agent: PPO + one belief + weighted bonuses."""
 
-    belief: str = "none"  # none | recurrent | oracle | varibad | task_supervised
+    belief: str = "none"  # none | recurrent | oracle | varibad | task_supervised | task_aware
     ppo: PPOConfig = PPOConfig()
     vae: VAEConfig = VAEConfig()
     recurrent: RecurrentConfig = RecurrentConfig()

@@ -28,6 +28,8 @@ PRESETS: dict[str, AgentConfig] = {
     "varibad_rh": AgentConfig(belief="varibad", bonuses=(HYPERSTATE_BONUS,)),
     "hyperx": AgentConfig(belief="varibad", bonuses=(HYPERSTATE_BONUS, STATE_BONUS)),
     "task_supervised": AgentConfig(belief="task_supervised"),
+    # Not a meta-learner: knows the task. evaluation/run.py trains it as the reference for regret.
+    "task_aware": AgentConfig(belief="task_aware"),
 }
 
 

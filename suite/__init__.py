@@ -8,7 +8,7 @@ Register your own meta-task from your own module with `@suite.register("name")`.
 
 from suite import cheetah_dir  # noqa: F401  (registers the built-in tasks)
 from suite._batch import BatchEnv, BatchStep, LoopBatch
-from suite._registry import TASKS, batch, list_tasks, load, register, unregister
+from suite._registry import TASKS, batch, exploration_metrics, list_tasks, load, register, task_prior, unregister
 from suite._seeding import as_generator, spawn_seeds
 from suite.base import MetaTask, TaskPrior
 
@@ -21,9 +21,11 @@ __all__ = [
     "TaskPrior",
     "as_generator",
     "batch",
+    "exploration_metrics",
     "list_tasks",
     "load",
     "register",
     "spawn_seeds",
+    "task_prior",
     "unregister",
 ]

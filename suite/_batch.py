@@ -46,6 +46,9 @@ class BatchEnv(Protocol):
     def reset(self) -> BatchStep:
         """Starts a new BAMDP episode in every copy."""
 
+    def set_tasks(self, tasks: np.ndarray | None) -> None:
+        """Forces copy i's task parameters to tasks[i] from the next BAMDP reset (None: the prior)."""
+
     def step(self, action: np.ndarray) -> BatchStep:
         """Applies `action` of shape (N, *action_spec.shape)."""
 
@@ -104,6 +107,12 @@ class LoopBatch:
         reward = np.array([s.reward for s in steps], dtype=np.float64)
         discount = np.array([s.discount for s in steps], dtype=np.float64)
         return BatchStep(observation, reward, discount, last, final)
+
+    def set_tasks(self, tasks: np.ndarray | None) -> None:
+        if tasks is not None and len(tasks) != self.num_envs:
+            raise ValueError(f"need one task per copy ({self.num_envs}), got {len(tasks)}")
+        for i, env in enumerate(self._envs):
+            env.task.force_task(None if tasks is None else tasks[i])
 
     def state_dict(self) -> dict:
         raise NotImplementedError(

@@ -27,6 +27,7 @@ class TaskEntry:
     name: str
     factory: Factory
     batch_factory: Callable[..., BatchEnv] | None = None
+    metrics: Callable[..., dict] | None = None
 
 
 _REGISTRY: dict[str, TaskEntry] = {}
@@ -35,12 +36,16 @@ _REGISTRY: dict[str, TaskEntry] = {}
 TASKS: list[str] = []
 
 
-def register(name: str, *, batch: Callable[..., BatchEnv] | None = None) -> Callable[[Factory], Factory]:
+def register(
+    name: str, *, batch: Callable[..., BatchEnv] | None = None, metrics: Callable[..., dict] | None = None
+) -> Callable[[Factory], Factory]:
     """Decorator registering `factory(seed=None, **kwargs)` under `name`.
 
     `batch`, if given, is a batched simulator factory `batch(num_envs, seed=None, num_threads=0, **kwargs)`
     taking the factory's keyword arguments; it must reproduce the dm_control environment exactly (see
-    `suite.batch`).
+    `suite.batch`). `metrics`, if given, computes deployed-exploration metrics
+    `metrics(observations, rewards, tasks, **task_kwargs) -> {name: (M,) array}` from M deployments
+    ((T, M, ...) observations each step ended in, (T, M) rewards, (M, P) true tasks).
     """
     if not isinstance(name, str) or not name:
         raise ValueError(f"task name must be a non-empty string, got {name!r}")
@@ -50,7 +55,7 @@ def register(name: str, *, batch: Callable[..., BatchEnv] | None = None) -> Call
             raise ValueError(f"task {name!r} is already registered (by {_REGISTRY[name].factory.__module__})")
         if "seed" not in inspect.signature(factory).parameters:
             raise TypeError(f"factory for {name!r} must accept a `seed` keyword argument")
-        _REGISTRY[name] = TaskEntry(name, factory, batch)
+        _REGISTRY[name] = TaskEntry(name, factory, batch, metrics)
         TASKS[:] = sorted(_REGISTRY)
         return factory
 
@@ -62,6 +67,16 @@ def unregister(name: str) -> None:
     _lookup(name)
     del _REGISTRY[name]
     TASKS[:] = sorted(_REGISTRY)
+
+
+def exploration_metrics(name: str) -> Callable[..., dict] | None:
+    """The deployed-exploration metrics function task `name` declares, or None."""
+    return _lookup(name).metrics
+
+
+def task_prior(name: str, **kwargs: Any):
+    """The task prior of a registered task (from a throwaway instance of its environment)."""
+    return load(name, seed=0, **kwargs).task.prior
 
 
 def list_tasks() -> list[str]:

@@ -52,7 +52,8 @@ class MetaTask(base.Task):
             raise ValueError(f"episodes_per_task must be a positive integer, got {episodes_per_task!r}")
         self._rng = as_generator(random)
         self._prior = prior
-        self._forced_task = None if task is None else np.atleast_1d(np.asarray(task, dtype=np.float64))
+        self._forced_task = None
+        self.force_task(task)
         self.episode_length = int(episode_length)
         self.episodes_per_task = int(episodes_per_task)
         self.privileged = privileged
@@ -83,6 +84,10 @@ class MetaTask(base.Task):
     @property
     def inner_episode(self) -> int:
         return self._inner_episode
+
+    def force_task(self, task: np.ndarray | float | None) -> None:
+        """Fixes the task parameters of every following BAMDP episode (None: draw from the prior again)."""
+        self._forced_task = None if task is None else np.atleast_1d(np.asarray(task, dtype=np.float64))
 
     def sample_task(self) -> np.ndarray:
         return self._forced_task.copy() if self._forced_task is not None else self._prior.sample(self._rng)

@@ -81,8 +81,6 @@ class CheetahDirection(MetaTask):
         direction: float | None = None,
         **kwargs,
     ):
-        if direction is not None and direction not in (BACKWARD, FORWARD):
-            raise ValueError(f"direction must be -1 (backward), +1 (forward) or None, got {direction!r}")
         if zone_radius < 0:
             raise ValueError(f"zone_radius must be >= 0, got {zone_radius}")
         super().__init__(DirectionPrior(), task=direction, **kwargs)
@@ -97,6 +95,11 @@ class CheetahDirection(MetaTask):
     def direction(self) -> float:
         """Privileged: the true direction of the current task."""
         return float(self._task[0])
+
+    def force_task(self, task) -> None:
+        if task is not None and np.ravel(task).tolist() not in ([BACKWARD], [FORWARD]):
+            raise ValueError(f"direction must be -1 (backward), +1 (forward) or None, got {task!r}")
+        super().force_task(task)
 
     def prior_belief(self) -> np.ndarray:
         return self._prior.probabilities()
@@ -225,6 +228,13 @@ class CheetahDirectionBatch:
         """Privileged: the true directions, (num_envs, 1)."""
         return self._direction.copy()
 
+    def set_tasks(self, tasks: np.ndarray | None) -> None:
+        """Forces copy i's task to `tasks[i]` from the next reset on (None: sample from the prior again)."""
+        if tasks is not None and len(tasks) != self.num_envs:
+            raise ValueError(f"need one task per copy ({self.num_envs}), got {len(tasks)}")
+        for i, task in enumerate(self._tasks):
+            task.force_task(None if tasks is None else tasks[i])
+
     def _reset_mdp(self) -> None:
         self._sim.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
         for i, task in enumerate(self._tasks):
@@ -317,6 +327,36 @@ class CheetahDirectionBatch:
         pass
 
 
+def zone_exploration_metrics(
+    observations: dict[str, np.ndarray],
+    rewards: np.ndarray,
+    tasks: np.ndarray,
+    zone_radius: float = ZONE_RADIUS,
+    **_: object,
+) -> dict[str, np.ndarray]:
+    """Deployed-exploration metrics of M deployments, one value per deployment.
+
+    `observations` are the observations each step ended in ((T, M, ...) arrays), `tasks` the true
+    directions (M, 1). Per deployment: `left_zone` (ever |x - x0| >= zone), `first_exit_step` (1-based
+    BAMDP step of the first exit, NaN if never), `correct_direction` (left, and the last MDP episode
+    ends beyond the zone on the rewarded side), `stuck` (left, and the last MDP episode ends back inside
+    the zone: the paper's Figure 3 failure), `distance_correct` (direction * final x-displacement).
+    """
+    x = observations["x_displacement"][..., 0]
+    direction = np.asarray(tasks)[:, 0]
+    outside = np.abs(x) >= zone_radius
+    left = outside.any(axis=0)
+    first = np.where(left, outside.argmax(axis=0) + 1.0, np.nan)
+    final = x[-1]
+    return {
+        "left_zone": left.astype(float),
+        "first_exit_step": first,
+        "correct_direction": (left & (direction * final >= zone_radius)).astype(float),
+        "stuck": (left & (np.abs(final) < zone_radius)).astype(float),
+        "distance_correct": direction * final,
+    }
+
+
 def _register(name: str, zone_radius: float) -> None:
     def factory(
         seed: SeedLike = None,
@@ -343,7 +383,7 @@ def _register(name: str, zone_radius: float) -> None:
 
     factory.__name__ = factory.__qualname__ = name
     factory.__doc__ = f"`{name}`: cheetah-direction meta-task, zone radius {zone_radius} m (see suite.cheetah_dir)."
-    register(name, batch=batch_factory)(factory)
+    register(name, batch=batch_factory, metrics=zone_exploration_metrics)(factory)
 
 
 _register("cheetah_dir_sparse", ZONE_RADIUS)

@@ -326,3 +326,44 @@ def test_forced_direction_and_zone_kwargs():
     assert all(env.reset().observation["task"][0] == FORWARD for _ in range(5))
     assert isinstance(env, dm_env.Environment)
     assert env.task.zone_radius == 0.5 and env.task.direction == FORWARD
+
+
+def test_set_tasks_forces_each_copy_and_prior_resumes():
+    fast = suite.batch("cheetah_dir_sparse", 3, seed=0, privileged=True, episode_length=2)
+    slow = suite.LoopBatch(
+        [suite.load("cheetah_dir_sparse", seed=s, privileged=True, episode_length=2) for s in suite.spawn_seeds(0, 3)]
+    )
+    for vec in (fast, slow):
+        vec.set_tasks(np.array([[FORWARD], [BACKWARD], [FORWARD]]))
+        np.testing.assert_array_equal(vec.reset().observation["task"][:, 0], [FORWARD, BACKWARD, FORWARD])
+        vec.step(np.zeros((3, 6)))
+        out = vec.step(np.zeros((3, 6)))  # auto-reset keeps the forced tasks
+        assert out.last.all()
+        np.testing.assert_array_equal(out.observation["task"][:, 0], [FORWARD, BACKWARD, FORWARD])
+        with pytest.raises(ValueError, match="one task per copy"):
+            vec.set_tasks(np.ones((2, 1)))
+        with pytest.raises(ValueError, match="direction must be"):
+            vec.set_tasks(np.zeros((3, 1)))
+        vec.set_tasks(None)
+        draws = np.concatenate([vec.reset().observation["task"][:, 0] for _ in range(20)])
+        assert set(draws) == {FORWARD, BACKWARD}
+
+
+def test_zone_exploration_metrics_on_known_trajectories():
+    metrics = suite.exploration_metrics("cheetah_dir_sparse")
+    x = np.array(
+        [
+            [0.5, 1.0, -2.0, 1.0],
+            [0.5, 3.0, -6.0, 5.0],
+            [0.5, 5.5, -3.0, 9.0],
+            [0.5, 7.0, -1.0, 12.0],
+        ]
+    )[..., None]  # (T=4, M=4): stays; exits forward at step 3; exits backward then returns; exits at step 2
+    tasks = np.array([[FORWARD], [FORWARD], [FORWARD], [BACKWARD]])
+    m = metrics({"x_displacement": x}, np.zeros((4, 4)), tasks, zone_radius=5.0)
+    np.testing.assert_array_equal(m["left_zone"], [0, 1, 1, 1])
+    np.testing.assert_array_equal(m["first_exit_step"], [np.nan, 3, 2, 2])
+    np.testing.assert_array_equal(m["correct_direction"], [0, 1, 0, 0])
+    np.testing.assert_array_equal(m["stuck"], [0, 0, 1, 0])
+    np.testing.assert_array_equal(m["distance_correct"], [0.5, 7.0, -1.0, -12.0])
+    assert suite.exploration_metrics("cheetah_dir") is metrics
