@@ -14,8 +14,10 @@ $(STAMP): setup.cfg pyproject.toml
 	$(PY) -m pip install --quiet -e '.[dev]'
 	touch $(STAMP)
 
+# A small real benchmark run: two presets (+ the task-aware reference) on the sparse task, one seed.
 demo: $(STAMP)
-	$(PY) -m suite.demo
+	$(PY) evaluation/run.py --agents oracle oracle_rh --tasks cheetah_dir_sparse --seeds 0 \
+		--frames 300000 --eval-every 60000 --out runs/demo --force
 
 test: $(STAMP)
 	$(PY) -m ruff check .

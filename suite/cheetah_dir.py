@@ -11,6 +11,7 @@ Exact belief [P(backward), P(forward)]: [0.5, 0.5] until the first step that end
 from __future__ import annotations
 
 import collections
+import functools
 import logging
 
 import mujoco
@@ -383,7 +384,8 @@ def _register(name: str, zone_radius: float) -> None:
 
     factory.__name__ = factory.__qualname__ = name
     factory.__doc__ = f"`{name}`: cheetah-direction meta-task, zone radius {zone_radius} m (see suite.cheetah_dir)."
-    register(name, batch=batch_factory, metrics=zone_exploration_metrics)(factory)
+    metrics = functools.partial(zone_exploration_metrics, zone_radius=zone_radius)
+    register(name, batch=batch_factory, metrics=metrics)(factory)
 
 
 _register("cheetah_dir_sparse", ZONE_RADIUS)

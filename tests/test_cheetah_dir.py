@@ -360,10 +360,12 @@ def test_zone_exploration_metrics_on_known_trajectories():
         ]
     )[..., None]  # (T=4, M=4): stays; exits forward at step 3; exits backward then returns; exits at step 2
     tasks = np.array([[FORWARD], [FORWARD], [FORWARD], [BACKWARD]])
-    m = metrics({"x_displacement": x}, np.zeros((4, 4)), tasks, zone_radius=5.0)
+    m = metrics({"x_displacement": x}, np.zeros((4, 4)), tasks)
     np.testing.assert_array_equal(m["left_zone"], [0, 1, 1, 1])
     np.testing.assert_array_equal(m["first_exit_step"], [np.nan, 3, 2, 2])
     np.testing.assert_array_equal(m["correct_direction"], [0, 1, 0, 0])
     np.testing.assert_array_equal(m["stuck"], [0, 0, 1, 0])
     np.testing.assert_array_equal(m["distance_correct"], [0.5, 7.0, -1.0, -12.0])
-    assert suite.exploration_metrics("cheetah_dir") is metrics
+    # The dense task has no zone: every deployment "leaves" it on its first step.
+    dense = suite.exploration_metrics("cheetah_dir")({"x_displacement": x}, np.zeros((4, 4)), tasks)
+    np.testing.assert_array_equal(dense["first_exit_step"], [1, 1, 1, 1])

@@ -1,0 +1,192 @@
+"""One cell of the grid: train one agent on one task with one seed, evaluating as it goes.
+
+Everything a cell writes lives in `OUT/cells/<agent>__<task>__s<seed>/`: `record.json` (rewritten
+atomically after every evaluation point), the agent's training checkpoint, the final agent, and the
+final deployment's trajectories (`deployment.npz`). A cell whose record says `complete` is never re-run;
+an incomplete one resumes from its checkpoint.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import os
+import platform
+import subprocess
+import time
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+import agents
+from agents import config as config_lib
+from evaluation.deploy import deploy, deployment_metrics, evaluation_tasks
+
+
+@dataclasses.dataclass(frozen=True)
+class CellSpec:
+    """What one cell runs."""
+
+    agent: str
+    task: str
+    seed: int
+    frames: int
+    eval_every: int
+    eval_tasks: int
+    episodes_per_task: int | None
+    overrides: dict
+    out: str
+    resume: bool
+    progress: bool = True
+    position: int = 0
+
+    @property
+    def cell_id(self) -> str:
+        return f"{self.agent}__{self.task}__s{self.seed}"
+
+    @property
+    def directory(self) -> Path:
+        return Path(self.out) / "cells" / self.cell_id
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(json.dumps(data, indent=1, default=_json_default))
+    os.replace(tmp, path)
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
+
+
+def versions() -> dict:
+    """Package versions and the git commit of the code that produced a result."""
+    out = {"python": platform.python_version()}
+    for package in ("hyperstate", "torch", "mujoco", "dm-control", "numpy"):
+        try:
+            out[package] = metadata.version(package)
+        except metadata.PackageNotFoundError:
+            out[package] = None
+    try:
+        root = Path(__file__).resolve().parents[1]
+        out["git_commit"] = (
+            subprocess.run(
+                ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10
+            ).stdout.strip()
+            or None
+        )
+    except (OSError, subprocess.SubprocessError):
+        out["git_commit"] = None
+    return out
+
+
+def make_agent(spec: CellSpec):
+    """The cell's agent, with checkpoints aligned to evaluation points (so resume rejoins the curve)."""
+    agent = agents.make(spec.agent, **spec.overrides)
+    per_iteration = agent.config.ppo.num_envs * agent.config.ppo.rollout_length
+    every = max(1, round(spec.eval_every / per_iteration))
+    return agents.make(spec.agent, **{**spec.overrides, "checkpoint_every": every}), every, per_iteration
+
+
+def run_cell(spec: CellSpec) -> dict:
+    """Trains and evaluates one cell; returns its record (also on disk)."""
+    import torch  # noqa: F401  (imported here so that worker processes set their own threads)
+    from torch.utils.tensorboard import SummaryWriter
+
+    directory = spec.directory
+    directory.mkdir(parents=True, exist_ok=True)
+    record_path = directory / "record.json"
+    if spec.resume and record_path.exists():
+        record = json.loads(record_path.read_text())
+        if record.get("complete"):
+            return record
+    agent, every, per_iteration = make_agent(spec)
+    iterations = math.ceil(spec.frames / per_iteration)
+    record = {
+        "agent": spec.agent,
+        "task": spec.task,
+        "seed": spec.seed,
+        "frames": iterations * per_iteration,
+        "config": config_lib.to_dict(agent.config),
+        "curve": [],
+        "final": None,
+        "versions": versions(),
+        "complete": False,
+    }
+    if spec.resume and record_path.exists():
+        record["curve"] = json.loads(record_path.read_text())["curve"]
+    tasks = evaluation_tasks(spec.task, spec.eval_tasks)
+    writer = SummaryWriter(log_dir=str(Path(spec.out) / "tb" / spec.cell_id))
+    started = time.perf_counter() - (record["curve"][-1]["wall_seconds"] if record["curve"] else 0.0)
+
+    def evaluate(frames: int) -> dict:
+        metrics = deployment_metrics(deploy(agent, spec.task, tasks, spec.episodes_per_task), spec.task)
+        point = {
+            "frames": frames,
+            "online_return": metrics["online_return"],
+            "episode_returns": metrics["episode_returns"],
+            "wall_seconds": time.perf_counter() - started,
+        }
+        # A point re-run after a crash (its checkpoint was not yet written) replaces the old one.
+        record["curve"] = [p for p in record["curve"] if p["frames"] < frames] + [point]
+        writer.add_scalar("eval/online_return", point["online_return"], frames)
+        return metrics
+
+    def on_iteration(log: dict) -> None:
+        frames = log["frames"]
+        for key, value in log.items():
+            if isinstance(value, float) and key not in ("wall_seconds",):
+                writer.add_scalar(key if "/" in key else f"train/{key}", value, frames)
+        if log["iteration"] % every == 0 or log["iteration"] == iterations:
+            evaluate(frames)
+            write_json_atomic(record_path, record)
+            write_results(Path(spec.out))
+
+    agent.name = spec.cell_id
+    agent.train(
+        spec.task,
+        spec.frames,
+        spec.seed,
+        checkpoint_dir=directory,
+        resume=spec.resume,
+        progress=spec.progress,
+        on_iteration=on_iteration,
+    )
+    final = deploy(agent, spec.task, tasks, spec.episodes_per_task)
+    record["final"] = deployment_metrics(final, spec.task)
+    np.savez_compressed(
+        directory / "deployment.npz",
+        rewards=final.rewards,
+        tasks=final.tasks,
+        inner_episode=final.inner_episode,
+        **{f"obs_{k}": v for k, v in final.observations.items()},
+    )
+    agent.save(directory / "agent.pt")
+    record["complete"] = True
+    write_json_atomic(record_path, record)
+    write_results(Path(spec.out))
+    writer.close()
+    return record
+
+
+def load_records(out: Path) -> list[dict]:
+    """All cell records under `out`, in a stable order."""
+    records = []
+    for path in sorted((out / "cells").glob("*/record.json")):
+        try:
+            records.append(json.loads(path.read_text()))
+        except (OSError, json.JSONDecodeError):
+            continue  # a record being replaced right now; the next write catches up
+    return records
+
+
+def write_results(out: Path) -> None:
+    """`OUT/results.json`: one record per cell (the contract), written atomically."""
+    write_json_atomic(out / "results.json", load_records(out))

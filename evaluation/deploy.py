@@ -1,0 +1,87 @@
+"""Deployment: run a trained agent on held-out tasks for a whole BAMDP episode and measure it.
+
+Online return at deployment = mean over held-out tasks of the summed reward over the BAMDP horizon,
+starting from the prior belief (the agent's belief / hidden state is reset only at the BAMDP start),
+with deterministic actions. Also reported per inner MDP episode, plus the task's declared
+deployed-exploration metrics.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+import suite
+
+# Held-out tasks and initial states come from their own seed, the same for every agent and run.
+EVAL_SEED = 987_654_321
+
+
+def evaluation_tasks(task: str, n: int, seed: int = EVAL_SEED) -> np.ndarray:
+    """`n` held-out task parameters from the prior; a finite prior's support is covered in turn."""
+    prior = suite.task_prior(task)
+    support = prior.support()
+    if support is not None:
+        return np.stack([support[i % len(support)] for i in range(max(n, len(support)))])
+    rng = np.random.default_rng(seed)
+    return np.stack([prior.sample(rng) for _ in range(n)])
+
+
+@dataclasses.dataclass
+class Deployment:
+    """One deployment of M copies: (T, M) rewards, (T, M, ...) observations each step ended in."""
+
+    rewards: np.ndarray
+    observations: dict[str, np.ndarray]
+    inner_episode: np.ndarray  # (T, M) index of the MDP episode each step belongs to
+    tasks: np.ndarray  # (M, P)
+
+    def episode_returns(self) -> np.ndarray:
+        """(K, M) return of each inner MDP episode."""
+        k = int(self.inner_episode.max()) + 1
+        return np.stack([(self.rewards * (self.inner_episode == i)).sum(0) for i in range(k)])
+
+
+def deploy(
+    agent, task: str, tasks: np.ndarray, episodes_per_task: int | None = None, seed: int = EVAL_SEED
+) -> Deployment:
+    """Deploys `agent` on each of `tasks` for one BAMDP episode (deterministic actions)."""
+    kwargs = {} if episodes_per_task is None else {"episodes_per_task": episodes_per_task}
+    env = suite.batch(task, len(tasks), seed=seed, privileged=True, num_threads=1, **kwargs)
+    env.set_tasks(tasks)
+    out = env.reset()
+    state, rewards, observations, inner = None, [], [], []
+    while True:
+        inner.append(out.observation["inner_episode"][:, 0].copy())
+        action, state = agent.act(
+            out.observation, state, deterministic=True, reward=None if state is None else out.reward
+        )
+        out = env.step(action)
+        rewards.append(out.reward)
+        observations.append(out.final_observation)
+        if out.last.all():
+            break
+        if out.last.any():
+            raise RuntimeError("deployments must end together (all copies share the BAMDP horizon)")
+    env.close()
+    stacked = {k: np.stack([o[k] for o in observations]) for k in observations[0]}
+    return Deployment(np.stack(rewards), stacked, np.stack(inner).astype(int), np.asarray(tasks))
+
+
+def deployment_metrics(deployment: Deployment, task: str) -> dict:
+    """Online return (mean over tasks), per-episode returns, and the task's exploration metrics."""
+    returns = deployment.rewards.sum(0)
+    metrics: dict = {
+        "online_return": float(returns.mean()),
+        "online_return_per_task": returns.tolist(),
+        "episode_returns": deployment.episode_returns().mean(1).tolist(),
+    }
+    declared = suite.exploration_metrics(task)
+    if declared is not None:
+        values = declared(deployment.observations, deployment.rewards, deployment.tasks)
+        for name, v in values.items():
+            v = np.asarray(v, dtype=float)
+            finite = v[np.isfinite(v)]
+            metrics[name] = float(finite.mean()) if len(finite) else None
+    return metrics

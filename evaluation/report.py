@@ -1,0 +1,163 @@
+"""Reports from `results.json`: `summary.csv`, figures, and the text table printed at the end."""
+
+from __future__ import annotations
+
+import csv
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from evaluation.stats import bootstrap_ci, iqm, mean_ci_curve
+
+REFERENCE_AGENT = "task_aware"
+SUMMARY_FIELDS = [
+    "agent",
+    "task",
+    "seeds",
+    "online_return_mean",
+    "online_return_iqm",
+    "ci95_low",
+    "ci95_high",
+    "reference_return",
+    "regret",
+    "left_zone",
+    "first_exit_step",
+    "correct_direction",
+    "stuck",
+]
+
+
+def _by_agent_task(records: list[dict]) -> dict[tuple[str, str], list[dict]]:
+    groups: dict[tuple[str, str], list[dict]] = defaultdict(list)
+    for r in records:
+        if r.get("final") is not None:
+            groups[(r["agent"], r["task"])].append(r)
+    return groups
+
+
+def summary_rows(records: list[dict]) -> list[dict]:
+    """One row per (agent, task): mean, IQM and 95 % bootstrap CI (of the mean) over seeds."""
+    groups = _by_agent_task(records)
+    rows = []
+    for (agent, task), cell in sorted(groups.items()):
+        returns = np.array([r["final"]["online_return"] for r in cell])
+        low, high = bootstrap_ci(returns)
+        reference = groups.get((REFERENCE_AGENT, task))
+        ref = float(np.mean([r["final"]["online_return"] for r in reference])) if reference else None
+        row = {
+            "agent": agent,
+            "task": task,
+            "seeds": len(cell),
+            "online_return_mean": float(returns.mean()),
+            "online_return_iqm": iqm(returns),
+            "ci95_low": low,
+            "ci95_high": high,
+            "reference_return": ref,
+            "regret": None if ref is None else ref - float(returns.mean()),
+        }
+        for metric in ("left_zone", "first_exit_step", "correct_direction", "stuck"):
+            values = [r["final"].get(metric) for r in cell if r["final"].get(metric) is not None]
+            row[metric] = float(np.mean(values)) if values else None
+        rows.append(row)
+    return rows
+
+
+def write_summary(out: Path, records: list[dict]) -> list[dict]:
+    rows = summary_rows(records)
+    tmp = out / "summary.csv.tmp"
+    with tmp.open("w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=SUMMARY_FIELDS)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: "" if row[k] is None else row[k] for k in SUMMARY_FIELDS})
+    tmp.replace(out / "summary.csv")
+    return rows
+
+
+def text_table(rows: list[dict]) -> str:
+    """The one-screen summary printed at the end of a run."""
+
+    def fmt(v, spec=".1f"):
+        return "-" if v is None else format(v, spec)
+
+    header = f"{'agent':<20} {'task':<20} {'seeds':>5} {'mean':>9} {'IQM':>9} {'95% CI':>19} {'regret':>9} {'left':>5}"
+    lines = [header, "-" * len(header)]
+    for r in rows:
+        ci = f"[{fmt(r['ci95_low'])}, {fmt(r['ci95_high'])}]"
+        lines.append(
+            f"{r['agent']:<20} {r['task']:<20} {r['seeds']:>5} {fmt(r['online_return_mean']):>9} "
+            f"{fmt(r['online_return_iqm']):>9} {ci:>19} {fmt(r['regret']):>9} {fmt(r['left_zone'], '.2f'):>5}"
+        )
+    return "\n".join(lines)
+
+
+def write_figures(out: Path, records: list[dict]) -> list[Path]:
+    """Learning curves per task (mean over seeds, 95 % CI band) and a behaviour plot per agent × task."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figures = out / "figures"
+    figures.mkdir(parents=True, exist_ok=True)
+    written = []
+    tasks = sorted({r["task"] for r in records})
+    for task in tasks:
+        fig, ax = plt.subplots(figsize=(6, 4))
+        agents_ = sorted({r["agent"] for r in records if r["task"] == task})
+        for agent in agents_:
+            cells = [r for r in records if r["task"] == task and r["agent"] == agent and r["curve"]]
+            if not cells:
+                continue
+            length = min(len(r["curve"]) for r in cells)
+            frames = np.array([p["frames"] for p in cells[0]["curve"][:length]])
+            curves = np.array([[p["online_return"] for p in r["curve"][:length]] for r in cells])
+            mean, low, high = mean_ci_curve(curves)
+            (line,) = ax.plot(frames, mean, label=f"{agent} ({len(cells)})")
+            ax.fill_between(frames, low, high, color=line.get_color(), alpha=0.2)
+        ax.set_xlabel("frames")
+        ax.set_ylabel("online return at deployment")
+        ax.set_title(task)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        path = figures / f"curves_{task}.png"
+        fig.savefig(path, dpi=100)
+        plt.close(fig)
+        written.append(path)
+    for cells in _by_agent_task(records).values():
+        path = _behaviour_plot(out, min(cells, key=lambda r: r["seed"]), figures, plt)
+        if path is not None:
+            written.append(path)
+    return written
+
+
+def _behaviour_plot(out: Path, record: dict, figures: Path, plt) -> Path | None:
+    """x-position vs step of the final deployment, one line per distinct task, zone borders dashed."""
+    import suite
+
+    cell = f"{record['agent']}__{record['task']}__s{record['seed']}"
+    npz = out / "cells" / cell / "deployment.npz"
+    if not npz.exists():
+        return None
+    data = np.load(npz)
+    if "obs_x_displacement" not in data:
+        return None
+    path = figures / f"behaviour_{cell}.png"
+    x, tasks = data["obs_x_displacement"][..., 0], data["tasks"]
+    zone = getattr(suite.load(record["task"], seed=0).task, "zone_radius", None)
+    fig, ax = plt.subplots(figsize=(6, 3.5))
+    for value in np.unique(tasks, axis=0):
+        i = int(np.flatnonzero((tasks == value).all(axis=1))[0])
+        ax.plot(np.arange(1, len(x) + 1), x[:, i], label=f"task {value.tolist()}")
+    if zone:
+        for border in (-zone, zone):
+            ax.axhline(border, color="k", linestyle="--", linewidth=1)
+    ax.set_xlabel("step of the BAMDP episode")
+    ax.set_ylabel("x-displacement from the start (m)")
+    ax.set_title(f"{record['agent']} on {record['task']}, seed {record['seed']}")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path

@@ -1,0 +1,272 @@
+"""Train and evaluate a grid of agents × tasks × seeds; report online return at deployment.
+
+    python evaluation/run.py --agents oracle oracle_rh --tasks cheetah_dir_sparse --seeds 0 1 2 \\
+        --frames 2000000 --out runs/fig2
+
+Writes OUT/results.json (one record per agent × task × seed: config, learning curve, final deployment
+metrics, versions), OUT/summary.csv (mean, IQM and 95 % bootstrap CI over seeds; regret against the
+task-aware reference), OUT/figures/*.png (learning curves with CI bands, behaviour plots) and
+OUT/tb/ (tensorboard scalars). Every cell writes its record atomically after each evaluation point and
+checkpoints there; after a crash, the same command with --resume finishes the grid.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import agents
+import suite
+from evaluation.cell import CellSpec, load_records, run_cell, write_json_atomic, write_results
+from evaluation.report import REFERENCE_AGENT, text_table, write_figures, write_summary
+
+
+class UsageError(Exception):
+    """A bad command line: reported in one line, exit code 2, nothing written."""
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog="evaluation/run.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument(
+        "--agents", nargs="+", required=True, metavar="A", help=f"agent presets: {', '.join(agents.list_presets())}"
+    )
+    p.add_argument("--tasks", nargs="+", required=True, metavar="T", help=f"tasks: {', '.join(suite.TASKS)}")
+    p.add_argument("--seeds", nargs="+", type=int, default=[0], metavar="S", help="training seeds (default: 0)")
+    p.add_argument("--frames", type=int, required=True, help="environment steps of training per cell")
+    p.add_argument("--out", type=Path, required=True, help="output directory")
+    p.add_argument(
+        "--eval-every",
+        type=int,
+        default=None,
+        metavar="F",
+        help="frames between evaluation points (default: frames / 10, rounded to iterations)",
+    )
+    p.add_argument(
+        "--eval-tasks",
+        type=int,
+        default=20,
+        metavar="M",
+        help="held-out tasks per evaluation (finite priors: every support point is covered)",
+    )
+    p.add_argument(
+        "--episodes-per-task",
+        type=int,
+        default=None,
+        metavar="K",
+        help="BAMDP horizon (MDP episodes) at deployment (default: the task's)",
+    )
+    p.add_argument(
+        "--config",
+        type=Path,
+        default=None,
+        metavar="FILE",
+        help="TOML or YAML overrides: a table per preset name, and/or 'all' for every agent, "
+        'mapping dotted config fields to values (e.g. [all] "ppo.num_envs" = 32)',
+    )
+    p.add_argument(
+        "--no-reference",
+        action="store_true",
+        help=f"do not train the task-aware reference ({REFERENCE_AGENT}) used for regret",
+    )
+    p.add_argument("--resume", action="store_true", help="continue a grid in OUT (completed cells are kept)")
+    p.add_argument("--force", action="store_true", help="delete OUT's previous results first")
+    p.add_argument(
+        "--executor",
+        choices=["local", "ray"],
+        default="local",
+        help="local: a process pool on this machine; ray: one Ray task per cell",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="W",
+        help="parallel cells (local executor; default: 1 per 2 cores, at least 1)",
+    )
+    p.add_argument("--ray-address", default=None, help="Ray cluster address (default: $RAY_ADDRESS, else local)")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    return p.parse_args(argv)
+
+
+def load_config_file(path: Path | None) -> dict:
+    if path is None:
+        return {}
+    if not path.exists():
+        raise UsageError(f"--config {path}: no such file")
+    text = path.read_text()
+    if path.suffix == ".toml":
+        import tomllib
+
+        data = tomllib.loads(text)
+    elif path.suffix in (".yaml", ".yml"):
+        import yaml
+
+        data = yaml.safe_load(text) or {}
+    else:
+        raise UsageError(f"--config {path}: use a .toml, .yaml or .yml file")
+    if not isinstance(data, dict) or not all(isinstance(v, dict) for v in data.values()):
+        raise UsageError(f"--config {path}: expected tables of overrides per preset name (or 'all')")
+    return data
+
+
+def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
+    """Validates names and overrides; returns the agent list and each agent's overrides."""
+    if args.frames <= 0:
+        raise UsageError(f"--frames must be positive, got {args.frames}")
+    for name in args.tasks:
+        if name not in suite.TASKS:
+            raise UsageError(f"unknown task {name!r}; tasks: {', '.join(suite.TASKS)}")
+    for name in args.agents:
+        if name not in agents.PRESETS:
+            raise UsageError(f"unknown agent {name!r}; presets: {', '.join(agents.list_presets())}")
+    if args.eval_tasks < 1 or (args.eval_every is not None and args.eval_every < 1):
+        raise UsageError("--eval-tasks and --eval-every must be positive")
+    if args.episodes_per_task is not None and args.episodes_per_task < 1:
+        raise UsageError(f"--episodes-per-task must be positive, got {args.episodes_per_task}")
+    config = load_config_file(args.config)
+    names = list(dict.fromkeys(args.agents + ([] if args.no_reference else [REFERENCE_AGENT])))
+    unknown = set(config) - set(names) - {"all"}
+    if unknown:
+        raise UsageError(f"--config has tables for agents not in the grid: {', '.join(sorted(unknown))}")
+    overrides = {}
+    for name in names:
+        merged = {**config.get("all", {}), **config.get(name, {})}
+        try:
+            agents.make(name, **merged)
+        except ValueError as e:
+            raise UsageError(f"--config for {name}: {e}") from None
+        overrides[name] = merged
+    return names, overrides
+
+
+def prepare_out(args: argparse.Namespace, grid: dict) -> None:
+    """Refuses to mix grids or overwrite results unless asked (--resume / --force)."""
+    out: Path = args.out
+    grid_file = out / "grid.json"
+    if args.force and out.exists():
+        shutil.rmtree(out)
+    has_results = grid_file.exists() or (out / "results.json").exists() or (out / "cells").exists()
+    if has_results:
+        previous = json.loads(grid_file.read_text()) if grid_file.exists() else None
+        if not args.resume:
+            what = "this grid" if previous == grid else "a different grid"
+            raise UsageError(
+                f"--out {out} holds results of {what}; pass --resume to continue it or --force to overwrite"
+            )
+        if previous != grid:
+            raise UsageError(
+                f"--out {out} holds results of a different grid; --resume needs the same arguments "
+                "(or use --force or another --out)"
+            )
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(grid_file, grid)
+
+
+def run_local(specs: list[CellSpec], workers: int, progress: bool) -> None:
+    from tqdm.auto import tqdm
+
+    overall = tqdm(total=len(specs), desc="grid", unit="cell", disable=not progress, position=0)
+    if workers == 1:
+        for spec in specs:
+            run_cell(spec)
+            overall.update(1)
+    else:
+        import concurrent.futures
+        import multiprocessing
+
+        with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
+            for future in concurrent.futures.as_completed([pool.submit(run_cell, s) for s in specs]):
+                future.result()
+                overall.update(1)
+    overall.close()
+
+
+def run_ray(specs: list[CellSpec], address: str | None, progress: bool) -> None:
+    try:
+        import ray
+    except ImportError:
+        raise UsageError("--executor ray needs Ray: pip install '.[ray]'") from None
+    from tqdm.auto import tqdm
+
+    ray.init(address=address or os.environ.get("RAY_ADDRESS"), ignore_reinit_error=True, log_to_driver=False)
+    remote = ray.remote(num_cpus=1)(run_cell)
+    pending = [remote.remote(s) for s in specs]
+    overall = tqdm(total=len(specs), desc="grid (ray)", unit="cell", disable=not progress)
+    while pending:
+        done, pending = ray.wait(pending, num_returns=1)
+        ray.get(done)
+        overall.update(len(done))
+    overall.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    try:
+        names, overrides = build_grid(args)
+        eval_every = args.eval_every or max(1, args.frames // 10)
+        grid = {
+            "agents": names,
+            "tasks": args.tasks,
+            "seeds": args.seeds,
+            "frames": args.frames,
+            "eval_every": eval_every,
+            "eval_tasks": args.eval_tasks,
+            "episodes_per_task": args.episodes_per_task,
+            "overrides": overrides,
+        }
+        prepare_out(args, grid)
+    except UsageError as e:
+        print(f"evaluation/run.py: error: {e}", file=sys.stderr)
+        return 2
+    workers = args.workers or max(1, (os.cpu_count() or 1) // 2)
+    cells_per_worker_threads = max(1, (os.cpu_count() or 1) // workers)
+    specs = []
+    for i, (name, task, seed) in enumerate((n, t, s) for t in args.tasks for n in names for s in args.seeds):
+        agent_overrides = dict(overrides[name])
+        if args.executor == "local" and workers > 1:
+            # Parallel cells share the cores: give each cell's physics its share.
+            agent_overrides.setdefault("physics_threads", cells_per_worker_threads)
+        specs.append(
+            CellSpec(
+                name,
+                task,
+                seed,
+                args.frames,
+                eval_every,
+                args.eval_tasks,
+                args.episodes_per_task,
+                agent_overrides,
+                str(args.out),
+                args.resume,
+                not args.no_progress,
+                i + 1,
+            )
+        )
+    started = time.perf_counter()
+    try:
+        if args.executor == "ray":
+            run_ray(specs, args.ray_address, not args.no_progress)
+        else:
+            run_local(specs, workers, not args.no_progress)
+    except UsageError as e:
+        print(f"evaluation/run.py: error: {e}", file=sys.stderr)
+        return 2
+    write_results(args.out)
+    records = load_records(args.out)
+    rows = write_summary(args.out, records)
+    write_figures(args.out, records)
+    print()
+    print(text_table(rows))
+    print(f"\n{len(records)} cells in {time.perf_counter() - started:.0f} s; results in {args.out}/")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,277 @@
+"""evaluation/run.py: the results contract, metrics, errors, crash + resume, Ray."""
+
+import csv
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import agents
+import suite
+from evaluation.deploy import deploy, deployment_metrics, evaluation_tasks
+from evaluation.stats import bootstrap_ci, iqm
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN = [sys.executable, str(ROOT / "evaluation" / "run.py")]
+TINY_CONFIG = """
+[all]
+"ppo.num_envs" = 4
+"ppo.rollout_length" = 50
+"vae.batch_trajectories" = 2
+"vae.subsample_elbos" = 10
+"vae.subsample_decodes" = 10
+"""
+
+
+def run(args, **kwargs) -> subprocess.CompletedProcess:
+    env = {**os.environ, "MUJOCO_GL": "disable"}
+    return subprocess.run(RUN + [str(a) for a in args], capture_output=True, text=True, env=env, timeout=600, **kwargs)
+
+
+@pytest.fixture
+def tiny_config(tmp_path) -> Path:
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY_CONFIG)
+    return path
+
+
+def strip_times(records):
+    """Results without wall-clock fields (which legitimately differ between runs)."""
+    out = []
+    for r in records:
+        r = json.loads(json.dumps(r))
+        for point in r["curve"]:
+            point.pop("wall_seconds")
+        r.pop("versions")
+        out.append(r)
+    return out
+
+
+# Statistics -----------------------------------------------------------------------------------------
+def test_iqm_and_bootstrap_ci():
+    assert iqm(np.array([0.0, 1.0, 2.0, 3.0, 100.0, -100.0, 1.5, 2.5])) == pytest.approx(np.mean([1.0, 1.5, 2.0, 2.5]))
+    low, high = bootstrap_ci(np.array([1.0, 2.0, 3.0, 4.0, 5.0]))
+    assert 1.0 <= low < 3.0 < high <= 5.0
+    assert bootstrap_ci(np.array([7.0])) == (7.0, 7.0)
+
+
+# Deployment -----------------------------------------------------------------------------------------
+def test_evaluation_tasks_cover_a_finite_prior():
+    tasks = evaluation_tasks("cheetah_dir_sparse", 5)
+    assert tasks.shape == (5, 1) and set(tasks[:, 0]) == {-1.0, 1.0}
+    assert evaluation_tasks("cheetah_dir_sparse", 1).shape == (2, 1)  # every support point at least once
+
+
+def test_online_return_matches_independent_rollouts():
+    agent = agents.make("oracle", **{"ppo.num_envs": 4, "ppo.rollout_length": 50})
+    agent.train("cheetah_dir_sparse", frames=400, seed=0, progress=False)
+    tasks = np.array([[1.0], [-1.0]])
+    deployment = deploy(agent, "cheetah_dir_sparse", tasks, episodes_per_task=2, seed=5)
+    metrics = deployment_metrics(deployment, "cheetah_dir_sparse")
+    # The same deployments, one dm_control environment at a time.
+    totals, per_episode = [], []
+    for i, s in enumerate(suite.spawn_seeds(5, 2)):
+        env = suite.load("cheetah_dir_sparse", seed=s, privileged=True, episodes_per_task=2, direction=tasks[i, 0])
+        step, state, rewards = env.reset(), None, []
+        while not step.last():
+            obs = {k: v[None] for k, v in step.observation.items()}
+            action, state = agent.act(obs, state, reward=None if state is None else np.array([step.reward]))
+            step = env.step(action[0])
+            rewards.append(step.reward)
+        totals.append(sum(rewards))
+        per_episode.append([sum(rewards[:200]), sum(rewards[200:])])
+    assert metrics["online_return"] == pytest.approx(np.mean(totals), rel=1e-6)
+    np.testing.assert_allclose(metrics["episode_returns"], np.mean(per_episode, axis=0), rtol=1e-6)
+    assert metrics["left_zone"] == 0.0 and metrics["first_exit_step"] is None
+
+
+# The CLI ---------------------------------------------------------------------------------------------
+def test_grid_writes_the_results_contract(tmp_path, tiny_config):
+    out = tmp_path / "grid"
+    proc = run(
+        [
+            "--agents",
+            "oracle",
+            "varibad",
+            "--tasks",
+            "cheetah_dir_sparse",
+            "--seeds",
+            "0",
+            "1",
+            "--frames",
+            400,
+            "--eval-every",
+            200,
+            "--eval-tasks",
+            4,
+            "--config",
+            tiny_config,
+            "--out",
+            out,
+            "--no-progress",
+        ]
+    )
+    assert proc.returncode == 0, proc.stderr
+    records = json.loads((out / "results.json").read_text())
+    cells = {(r["agent"], r["task"], r["seed"]) for r in records}
+    assert cells == {(a, "cheetah_dir_sparse", s) for a in ("oracle", "varibad", "task_aware") for s in (0, 1)}
+    for r in records:
+        assert set(r) >= {"agent", "task", "seed", "frames", "config", "curve", "final", "versions"}
+        assert [p["frames"] for p in r["curve"]] == [200, 400]
+        assert set(r["curve"][0]) == {"frames", "online_return", "episode_returns", "wall_seconds"}
+        assert r["config"]["ppo"]["num_envs"] == 4 and r["config"]["belief"] in ("oracle", "varibad", "task_aware")
+        final = r["final"]
+        assert final["online_return"] == pytest.approx(np.mean(final["online_return_per_task"]))
+        assert final["online_return"] == pytest.approx(r["curve"][-1]["online_return"])
+        assert {"left_zone", "first_exit_step", "correct_direction", "stuck", "distance_correct"} <= set(final)
+        assert r["versions"]["mujoco"] == "3.17.0"
+    with (out / "summary.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert {(row["agent"], row["seeds"]) for row in rows} == {("oracle", "2"), ("varibad", "2"), ("task_aware", "2")}
+    for row in rows:
+        finals = [r["final"]["online_return"] for r in records if r["agent"] == row["agent"]]
+        assert float(row["online_return_mean"]) == pytest.approx(np.mean(finals))
+        assert float(row["ci95_low"]) <= float(row["online_return_mean"]) <= float(row["ci95_high"])
+        reference = np.mean([r["final"]["online_return"] for r in records if r["agent"] == "task_aware"])
+        assert float(row["regret"]) == pytest.approx(reference - np.mean(finals))
+    figures = sorted(p.name for p in (out / "figures").glob("*.png"))
+    assert "curves_cheetah_dir_sparse.png" in figures
+    assert "behaviour_oracle__cheetah_dir_sparse__s0.png" in figures
+    assert all((out / "figures" / f).read_bytes()[:4] == b"\x89PNG" for f in figures)
+    assert any((out / "tb").rglob("events.out.tfevents.*"))
+    assert "oracle" in proc.stdout and "IQM" in proc.stdout  # the closing text table
+
+
+@pytest.mark.parametrize(
+    "args,message",
+    [
+        (["--agents", "orakel", "--tasks", "cheetah_dir_sparse"], "unknown agent 'orakel'"),
+        (["--agents", "oracle", "--tasks", "cheetah_sparse"], "unknown task 'cheetah_sparse'"),
+        (["--agents", "oracle", "--tasks", "cheetah_dir", "--frames", "0"], "--frames must be positive"),
+    ],
+)
+def test_bad_arguments_exit_2_with_one_line(tmp_path, args, message):
+    argv = args + (["--frames", "100"] if "--frames" not in args else []) + ["--out", tmp_path / "o"]
+    proc = run(argv)
+    assert proc.returncode == 2
+    assert message in proc.stderr and len(proc.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
+
+
+def test_bad_config_field_and_foreign_out_dir(tmp_path, tiny_config):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[oracle]\n"ppo.lrr" = 0.1\n')
+    proc = run(
+        ["--agents", "oracle", "--tasks", "cheetah_dir", "--frames", 100, "--config", bad, "--out", tmp_path / "o"]
+    )
+    assert proc.returncode == 2 and "ppo.lrr" in proc.stderr and "did you mean ppo.lr" in proc.stderr
+    out = tmp_path / "grid"
+    args = [
+        "--agents",
+        "oracle",
+        "--tasks",
+        "cheetah_dir",
+        "--frames",
+        200,
+        "--config",
+        tiny_config,
+        "--no-reference",
+        "--eval-tasks",
+        2,
+        "--out",
+        out,
+        "--no-progress",
+    ]
+    assert run(args).returncode == 0
+    before = (out / "results.json").read_bytes()
+    other = run([*args[:5], 400, *args[6:]])  # a different grid (more frames) in the same --out
+    assert other.returncode == 2 and "different grid" in other.stderr
+    again = run(args)  # the same grid without --resume
+    assert again.returncode == 2 and "--resume" in again.stderr
+    assert (out / "results.json").read_bytes() == before
+    resumed = run(args + ["--resume"])  # nothing left to do: completed cells are kept
+    assert resumed.returncode == 0
+    assert strip_times(json.loads((out / "results.json").read_text())) == strip_times(json.loads(before))
+
+
+def test_sigkill_then_resume_equals_uninterrupted_run(tmp_path, tiny_config):
+    args = [
+        "--agents",
+        "varibad",
+        "--tasks",
+        "cheetah_dir_sparse",
+        "--seeds",
+        "3",
+        "--frames",
+        1200,
+        "--eval-every",
+        200,
+        "--eval-tasks",
+        2,
+        "--config",
+        tiny_config,
+        "--no-reference",
+        "--no-progress",
+    ]
+    assert run(args + ["--out", tmp_path / "whole"]).returncode == 0
+
+    out = tmp_path / "killed"
+    env = {**os.environ, "MUJOCO_GL": "disable"}
+    proc = subprocess.Popen(
+        RUN + [str(a) for a in args] + ["--out", str(out)],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    record = out / "cells" / "varibad__cheetah_dir_sparse__s3" / "record.json"
+    deadline = time.time() + 300
+    while time.time() < deadline:  # kill once two evaluation points are on disk, mid-training
+        if record.exists() and len(json.loads(record.read_text())["curve"]) >= 2:
+            break
+        time.sleep(0.05)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    partial = json.loads(record.read_text())
+    assert not partial["complete"] and 2 <= len(partial["curve"]) < 6
+    resumed = run(args + ["--out", out, "--resume"])
+    assert resumed.returncode == 0, resumed.stderr
+    whole = json.loads((tmp_path / "whole" / "results.json").read_text())
+    again = json.loads((out / "results.json").read_text())
+    assert strip_times(again) == strip_times(whole)
+
+
+def test_ray_executor_runs_a_tiny_grid(tmp_path, tiny_config):
+    out = tmp_path / "ray"
+    proc = run(
+        [
+            "--agents",
+            "oracle",
+            "--tasks",
+            "cheetah_dir",
+            "--seeds",
+            0,
+            1,
+            "--frames",
+            200,
+            "--eval-tasks",
+            2,
+            "--config",
+            tiny_config,
+            "--no-reference",
+            "--executor",
+            "ray",
+            "--out",
+            out,
+            "--no-progress",
+        ]
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    records = json.loads((out / "results.json").read_text())
+    assert sorted(r["seed"] for r in records) == [0, 1] and all(r["complete"] for r in records)
