@@ -149,7 +149,7 @@ def run_cell(spec: CellSpec) -> dict:
             write_json_atomic(record_path, record)
             write_results(Path(spec.out))
 
-    agent.name = spec.cell_id
+    agent.name = f"{spec.agent} seed {spec.seed}"
     agent.train(
         spec.task,
         spec.frames,

@@ -95,27 +95,8 @@ def test_online_return_matches_independent_rollouts():
 def test_grid_writes_the_results_contract(tmp_path, tiny_config):
     out = tmp_path / "grid"
     proc = run(
-        [
-            "--agents",
-            "oracle",
-            "varibad",
-            "--tasks",
-            "cheetah_dir_sparse",
-            "--seeds",
-            "0",
-            "1",
-            "--frames",
-            400,
-            "--eval-every",
-            200,
-            "--eval-tasks",
-            4,
-            "--config",
-            tiny_config,
-            "--out",
-            out,
-            "--no-progress",
-        ]
+        "--agents oracle varibad --tasks cheetah_dir_sparse --seeds 0 1 --frames 400 --eval-every 200 "
+        f"--eval-tasks 4 --workers 2 --config {tiny_config} --out {out} --no-progress".split()
     )
     assert proc.returncode == 0, proc.stderr
     records = json.loads((out / "results.json").read_text())
@@ -172,25 +153,11 @@ def test_bad_config_field_and_foreign_out_dir(tmp_path, tiny_config):
     )
     assert proc.returncode == 2 and "ppo.lrr" in proc.stderr and "did you mean ppo.lr" in proc.stderr
     out = tmp_path / "grid"
-    args = [
-        "--agents",
-        "oracle",
-        "--tasks",
-        "cheetah_dir",
-        "--frames",
-        200,
-        "--config",
-        tiny_config,
-        "--no-reference",
-        "--eval-tasks",
-        2,
-        "--out",
-        out,
-        "--no-progress",
-    ]
+    grid = f"--agents oracle --tasks cheetah_dir --config {tiny_config} --no-reference --eval-tasks 2 --out {out}"
+    args = [*grid.split(), "--no-progress", "--frames", "200"]
     assert run(args).returncode == 0
     before = (out / "results.json").read_bytes()
-    other = run([*args[:5], 400, *args[6:]])  # a different grid (more frames) in the same --out
+    other = run([*args[:-1], "400"])  # a different grid (more frames) in the same --out
     assert other.returncode == 2 and "different grid" in other.stderr
     again = run(args)  # the same grid without --resume
     assert again.returncode == 2 and "--resume" in again.stderr
@@ -201,24 +168,10 @@ def test_bad_config_field_and_foreign_out_dir(tmp_path, tiny_config):
 
 
 def test_sigkill_then_resume_equals_uninterrupted_run(tmp_path, tiny_config):
-    args = [
-        "--agents",
-        "varibad",
-        "--tasks",
-        "cheetah_dir_sparse",
-        "--seeds",
-        "3",
-        "--frames",
-        1200,
-        "--eval-every",
-        200,
-        "--eval-tasks",
-        2,
-        "--config",
-        tiny_config,
-        "--no-reference",
-        "--no-progress",
-    ]
+    args = (
+        "--agents varibad --tasks cheetah_dir_sparse --seeds 3 --frames 1200 --eval-every 200 --eval-tasks 2 "
+        f"--config {tiny_config} --no-reference --no-progress"
+    ).split()
     assert run(args + ["--out", tmp_path / "whole"]).returncode == 0
 
     out = tmp_path / "killed"
@@ -250,27 +203,8 @@ def test_sigkill_then_resume_equals_uninterrupted_run(tmp_path, tiny_config):
 def test_ray_executor_runs_a_tiny_grid(tmp_path, tiny_config):
     out = tmp_path / "ray"
     proc = run(
-        [
-            "--agents",
-            "oracle",
-            "--tasks",
-            "cheetah_dir",
-            "--seeds",
-            0,
-            1,
-            "--frames",
-            200,
-            "--eval-tasks",
-            2,
-            "--config",
-            tiny_config,
-            "--no-reference",
-            "--executor",
-            "ray",
-            "--out",
-            out,
-            "--no-progress",
-        ]
+        "--agents oracle --tasks cheetah_dir --seeds 0 1 --frames 200 --eval-tasks 2 --no-reference "
+        f"--config {tiny_config} --executor ray --out {out} --no-progress".split()
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     records = json.loads((out / "results.json").read_text())
