@@ -12,32 +12,15 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import time
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "disable")
 
-import mujoco  # noqa: E402
-import mujoco.batch  # noqa: E402
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from dm_control.suite import cheetah  # noqa: E402
+from suite_speed import raw_batch  # noqa: E402  (bench/ is on sys.path when run as a script)
 
 import agents  # noqa: E402
-from suite.cheetah_dir import N_SUB_STEPS  # noqa: E402
-
-
-def raw_physics(steps: int, num_envs: int, threads: int) -> float:
-    model = mujoco.MjModel.from_xml_string(*cheetah.get_model_and_assets())
-    sim = mujoco.batch.Batch(model, nsim=num_envs, nthread=threads)
-    ctrl = sim.bind("ctrl")
-    rng = np.random.default_rng(0)
-    calls = max(1, steps // num_envs)
-    start = time.perf_counter()
-    for _ in range(calls):
-        ctrl[:] = rng.uniform(-1, 1, (num_envs, 6))
-        sim.step(nstep=N_SUB_STEPS)
-    return calls * num_envs / (time.perf_counter() - start)
 
 
 def main() -> None:
@@ -55,7 +38,7 @@ def main() -> None:
     train_fps = frames / log[-1]["wall_seconds"]
     collect_fps = float(np.mean([e["collect_fps"] for e in log]))
     threads = agent.config.physics_threads or os.cpu_count() or 1
-    physics_fps = raw_physics(frames, args.num_envs, threads)
+    physics_fps = raw_batch(frames, args.num_envs, threads)
     result = {
         "preset": args.preset,
         "task": args.task,

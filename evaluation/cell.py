@@ -23,6 +23,7 @@ import numpy as np
 
 import agents
 from agents import config as config_lib
+from evaluation.coverage import HyperStateCoverage
 from evaluation.deploy import deploy, deployment_metrics, evaluation_tasks
 
 
@@ -123,6 +124,11 @@ def run_cell(spec: CellSpec) -> dict:
     if spec.resume and record_path.exists():
         record["curve"] = json.loads(record_path.read_text())["curve"]
     tasks = evaluation_tasks(spec.task, spec.eval_tasks)
+    coverage = HyperStateCoverage()
+    coverage_path = directory / "coverage.npy"
+    if spec.resume and coverage_path.exists():
+        # Cells are a set: replaying iterations after the checkpoint marks the same cells again.
+        coverage.visited = np.load(coverage_path)
     writer = SummaryWriter(log_dir=str(Path(spec.out) / "tb" / spec.cell_id))
     started = time.perf_counter() - (record["curve"][-1]["wall_seconds"] if record["curve"] else 0.0)
 
@@ -134,6 +140,9 @@ def run_cell(spec: CellSpec) -> dict:
             "episode_returns": metrics["episode_returns"],
             "wall_seconds": time.perf_counter() - started,
         }
+        if coverage.visited.any():
+            point["coverage"] = coverage.fraction()
+            writer.add_scalar("eval/hyperstate_coverage", point["coverage"], frames)
         # A point re-run after a crash (its checkpoint was not yet written) replaces the old one.
         record["curve"] = [p for p in record["curve"] if p["frames"] < frames] + [point]
         writer.add_scalar("eval/online_return", point["online_return"], frames)
@@ -146,6 +155,7 @@ def run_cell(spec: CellSpec) -> dict:
                 writer.add_scalar(key if "/" in key else f"train/{key}", value, frames)
         if log["iteration"] % every == 0 or log["iteration"] == iterations:
             evaluate(frames)
+            np.save(coverage_path, coverage.visited)
             write_json_atomic(record_path, record)
             write_results(Path(spec.out))
 
@@ -158,14 +168,16 @@ def run_cell(spec: CellSpec) -> dict:
         resume=spec.resume,
         progress=spec.progress,
         on_iteration=on_iteration,
+        on_rollout=lambda obs: coverage.update(obs) if coverage.applies_to(obs) else None,
     )
     final = deploy(agent, spec.task, tasks, spec.episodes_per_task)
-    record["final"] = deployment_metrics(final, spec.task)
+    record["final"] = deployment_metrics(final, spec.task, probe=True)
     np.savez_compressed(
         directory / "deployment.npz",
         rewards=final.rewards,
         tasks=final.tasks,
         inner_episode=final.inner_episode,
+        features=final.features,
         **{f"obs_{k}": v for k, v in final.observations.items()},
     )
     agent.save(directory / "agent.pt")

@@ -13,6 +13,7 @@ import dataclasses
 import numpy as np
 
 import suite
+from evaluation.probe import belief_quality
 
 # Held-out tasks and initial states come from their own seed, the same for every agent and run.
 EVAL_SEED = 987_654_321
@@ -36,6 +37,8 @@ class Deployment:
     observations: dict[str, np.ndarray]
     inner_episode: np.ndarray  # (T, M) index of the MDP episode each step belongs to
     tasks: np.ndarray  # (M, P)
+    features: np.ndarray  # (T, M, F) the agent's belief features when it chose each action
+    exact_belief: np.ndarray | None  # (T, M, B) the exact belief at the same moments, where the task has one
 
     def episode_returns(self) -> np.ndarray:
         """(K, M) return of each inner MDP episode."""
@@ -51,12 +54,14 @@ def deploy(
     env = suite.batch(task, len(tasks), seed=seed, privileged=True, num_threads=1, **kwargs)
     env.set_tasks(tasks)
     out = env.reset()
-    state, rewards, observations, inner = None, [], [], []
+    state, rewards, observations, inner, features, exact = None, [], [], [], [], []
     while True:
         inner.append(out.observation["inner_episode"][:, 0].copy())
+        exact.append(out.observation.get("belief"))
         action, state = agent.act(
             out.observation, state, deterministic=True, reward=None if state is None else out.reward
         )
+        features.append(agent.belief_features(state))
         out = env.step(action)
         rewards.append(out.reward)
         observations.append(out.final_observation)
@@ -66,11 +71,19 @@ def deploy(
             raise RuntimeError("deployments must end together (all copies share the BAMDP horizon)")
     env.close()
     stacked = {k: np.stack([o[k] for o in observations]) for k in observations[0]}
-    return Deployment(np.stack(rewards), stacked, np.stack(inner).astype(int), np.asarray(tasks))
+    return Deployment(
+        np.stack(rewards),
+        stacked,
+        np.stack(inner).astype(int),
+        np.asarray(tasks),
+        np.stack(features),
+        None if exact[0] is None else np.stack(exact),
+    )
 
 
-def deployment_metrics(deployment: Deployment, task: str) -> dict:
-    """Online return (mean over tasks), per-episode returns, and the task's exploration metrics."""
+def deployment_metrics(deployment: Deployment, task: str, probe: bool = False) -> dict:
+    """Online return (mean over tasks), per-episode returns, the task's exploration metrics and, with
+    `probe`, the belief-quality probe (tasks with an exact belief)."""
     returns = deployment.rewards.sum(0)
     metrics: dict = {
         "online_return": float(returns.mean()),
@@ -84,4 +97,6 @@ def deployment_metrics(deployment: Deployment, task: str) -> dict:
             v = np.asarray(v, dtype=float)
             finite = v[np.isfinite(v)]
             metrics[name] = float(finite.mean()) if len(finite) else None
+    if probe and deployment.exact_belief is not None and deployment.rewards.shape[1] >= 2:
+        metrics.update(belief_quality(deployment.features, deployment.exact_belief))
     return metrics

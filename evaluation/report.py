@@ -21,11 +21,39 @@ SUMMARY_FIELDS = [
     "ci95_high",
     "reference_return",
     "regret",
+    "bayes_estimate",
+    "gap_to_bayes",
     "left_zone",
     "first_exit_step",
     "correct_direction",
     "stuck",
+    "probe_kl_after",
+    "probe_accuracy_after",
+    "final_coverage",
 ]
+METRICS = ("left_zone", "first_exit_step", "correct_direction", "stuck", "probe_kl_after", "probe_accuracy_after")
+
+
+def bayes_optimal_estimate(reference_returns: np.ndarray, zone_radius: float, control_timestep: float) -> float:
+    """Estimated Bayes-optimal online return on a zone task, from the task-aware reference's returns.
+
+    A Bayes-optimal agent exits the zone on one side; half the time that side is wrong, and it turns at
+    once and crosses back, 2 × zone_radius metres, during which it earns nothing. At the reference's
+    pace each metre is worth 1 / control_timestep reward (reward = velocity per step), so the detour costs
+    min(R, 2 · zone_radius / control_timestep) of a deployment's return R. Turning around is taken as
+    free, so this is an optimistic (upper) estimate: the mean over deployments of R − ½ · detour.
+    """
+    r = np.asarray(reference_returns, dtype=float)
+    detour = np.minimum(np.maximum(r, 0.0), 2.0 * zone_radius / control_timestep)
+    return float(np.mean(r - 0.5 * detour))
+
+
+def _zone(task: str) -> tuple[float, float] | None:
+    import suite
+
+    env = suite.load(task, seed=0)
+    zone = getattr(env.task, "zone_radius", None)
+    return None if not zone else (float(zone), float(env.control_timestep()))
 
 
 def _by_agent_task(records: list[dict]) -> dict[tuple[str, str], list[dict]]:
@@ -45,6 +73,13 @@ def summary_rows(records: list[dict]) -> list[dict]:
         low, high = bootstrap_ci(returns)
         reference = groups.get((REFERENCE_AGENT, task))
         ref = float(np.mean([r["final"]["online_return"] for r in reference])) if reference else None
+        zone = _zone(task)
+        bayes = None
+        if reference and zone:
+            per_task = np.concatenate([r["final"]["online_return_per_task"] for r in reference])
+            bayes = bayes_optimal_estimate(per_task, *zone)
+        coverage = [r["curve"][-1].get("coverage") for r in cell if r["curve"]]
+        coverage = [c for c in coverage if c is not None]
         row = {
             "agent": agent,
             "task": task,
@@ -55,8 +90,11 @@ def summary_rows(records: list[dict]) -> list[dict]:
             "ci95_high": high,
             "reference_return": ref,
             "regret": None if ref is None else ref - float(returns.mean()),
+            "bayes_estimate": bayes,
+            "gap_to_bayes": None if bayes is None else bayes - float(returns.mean()),
+            "final_coverage": float(np.mean(coverage)) if coverage else None,
         }
-        for metric in ("left_zone", "first_exit_step", "correct_direction", "stuck"):
+        for metric in METRICS:
             values = [r["final"].get(metric) for r in cell if r["final"].get(metric) is not None]
             row[metric] = float(np.mean(values)) if values else None
         rows.append(row)
@@ -93,7 +131,8 @@ def text_table(rows: list[dict]) -> str:
 
 
 def write_figures(out: Path, records: list[dict]) -> list[Path]:
-    """Learning curves per task (mean over seeds, 95 % CI band) and a behaviour plot per agent × task."""
+    """Per task: learning curves (mean over seeds, 95 % CI band) beside hyper-state coverage; and a
+    behaviour plot per agent × task."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -104,7 +143,7 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
     written = []
     tasks = sorted({r["task"] for r in records})
     for task in tasks:
-        fig, ax = plt.subplots(figsize=(6, 4))
+        fig, (ax, cov_ax) = plt.subplots(1, 2, figsize=(11, 4))
         agents_ = sorted({r["agent"] for r in records if r["task"] == task})
         for agent in agents_:
             cells = [r for r in records if r["task"] == task and r["agent"] == agent and r["curve"]]
@@ -116,10 +155,18 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
             mean, low, high = mean_ci_curve(curves)
             (line,) = ax.plot(frames, mean, label=f"{agent} ({len(cells)})")
             ax.fill_between(frames, low, high, color=line.get_color(), alpha=0.2)
+            if all("coverage" in p for r in cells for p in r["curve"][:length]):
+                coverage = np.array([[p["coverage"] for p in r["curve"][:length]] for r in cells])
+                mean, low, high = mean_ci_curve(coverage)
+                cov_ax.plot(frames, mean, color=line.get_color(), label=agent)
+                cov_ax.fill_between(frames, low, high, color=line.get_color(), alpha=0.2)
         ax.set_xlabel("frames")
         ax.set_ylabel("online return at deployment")
         ax.set_title(task)
         ax.legend(fontsize=8)
+        cov_ax.set_xlabel("frames")
+        cov_ax.set_ylabel("hyper-state coverage (x × belief cells visited)")
+        cov_ax.set_title("pseudo-exploration during meta-training")
         fig.tight_layout()
         path = figures / f"curves_{task}.png"
         fig.savefig(path, dpi=100)

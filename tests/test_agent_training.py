@@ -83,29 +83,12 @@ def test_resume_from_checkpoint_equals_uninterrupted_run(preset, tmp_path):
     config = {**TINY, "checkpoint_every": 1}
     # A BAMDP episode (50 steps) spans two rollouts of 25 steps, so the checkpoint falls mid-episode.
     config["ppo.rollout_length"] = 25
+    run = {"frames": 500, "seed": 2, "task_kwargs": TINY_TASK, "progress": False}
     whole = agents.make(preset, **config)
-    whole_log = whole.train("cheetah_dir_sparse", frames=500, seed=2, task_kwargs=TINY_TASK, progress=False)
-
-    first = agents.make(preset, **config)
-    first.train(
-        "cheetah_dir_sparse",
-        frames=500,
-        seed=2,
-        task_kwargs=TINY_TASK,
-        progress=False,
-        checkpoint_dir=tmp_path,
-        stop_after_iterations=3,
-    )
+    whole_log = whole.train("cheetah_dir_sparse", **run)
+    agents.make(preset, **config).train("cheetah_dir_sparse", **run, checkpoint_dir=tmp_path, stop_after_iterations=3)
     second = agents.make(preset, **config)
-    resumed_log = second.train(
-        "cheetah_dir_sparse",
-        frames=500,
-        seed=2,
-        task_kwargs=TINY_TASK,
-        progress=False,
-        checkpoint_dir=tmp_path,
-        resume=True,
-    )
+    resumed_log = second.train("cheetah_dir_sparse", **run, checkpoint_dir=tmp_path, resume=True)
     for a, b in zip(_params(whole), _params(second), strict=True):
         torch.testing.assert_close(a, b, rtol=0, atol=0)
     drop = ("wall_seconds", "fps", "collect_fps")

@@ -105,13 +105,15 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
     for r in records:
         assert set(r) >= {"agent", "task", "seed", "frames", "config", "curve", "final", "versions"}
         assert [p["frames"] for p in r["curve"]] == [200, 400]
-        assert set(r["curve"][0]) == {"frames", "online_return", "episode_returns", "wall_seconds"}
+        assert set(r["curve"][0]) == {"frames", "online_return", "episode_returns", "wall_seconds", "coverage"}
         assert r["config"]["ppo"]["num_envs"] == 4 and r["config"]["belief"] in ("oracle", "varibad", "task_aware")
         final = r["final"]
         assert final["online_return"] == pytest.approx(np.mean(final["online_return_per_task"]))
         assert final["online_return"] == pytest.approx(r["curve"][-1]["online_return"])
         assert {"left_zone", "first_exit_step", "correct_direction", "stuck", "distance_correct"} <= set(final)
         assert r["versions"]["mujoco"] == "3.17.0"
+        assert {"probe_kl", "probe_kl_after", "informed_fraction"} <= set(final)
+        assert all(0.0 < p["coverage"] <= 1.0 for p in r["curve"])
     with (out / "summary.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert {(row["agent"], row["seeds"]) for row in rows} == {("oracle", "2"), ("varibad", "2"), ("task_aware", "2")}
@@ -121,6 +123,7 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
         assert float(row["ci95_low"]) <= float(row["online_return_mean"]) <= float(row["ci95_high"])
         reference = np.mean([r["final"]["online_return"] for r in records if r["agent"] == "task_aware"])
         assert float(row["regret"]) == pytest.approx(reference - np.mean(finals))
+        assert float(row["bayes_estimate"]) <= reference + 1e-9
     figures = sorted(p.name for p in (out / "figures").glob("*.png"))
     assert "curves_cheetah_dir_sparse.png" in figures
     assert "behaviour_oracle__cheetah_dir_sparse__s0.png" in figures
@@ -209,3 +212,47 @@ def test_ray_executor_runs_a_tiny_grid(tmp_path, tiny_config):
     assert proc.returncode == 0, proc.stderr[-2000:]
     records = json.loads((out / "results.json").read_text())
     assert sorted(r["seed"] for r in records) == [0, 1] and all(r["complete"] for r in records)
+
+
+# Beyond the paper: coverage, belief probe, Bayes-optimal estimate -----------------------------------
+def test_hyperstate_coverage_known_cases():
+    from evaluation.coverage import HyperStateCoverage
+
+    still = HyperStateCoverage()
+    still.update({"x_displacement": np.full((200, 4, 1), 0.3), "belief": np.full((200, 4, 2), 0.5)})
+    assert still.fraction() == pytest.approx(1 / (40 * 3))  # a policy that stands still covers one cell
+    sweep = HyperStateCoverage()
+    x = np.linspace(-19.9, 19.9, 400)[:, None, None]
+    sweep.update({"x_displacement": x, "belief": np.tile([0.0, 1.0], (400, 1, 1))})
+    assert sweep.visited[:, 2].all() and not sweep.visited[:, :2].any()
+    sweep.update({"x_displacement": x, "belief": np.tile([0.5, 0.5], (400, 1, 1))})
+    assert sweep.fraction() == pytest.approx(2 / 3)
+
+
+def _exact_beliefs(t_len=60, m=20, seed=0):
+    rng = np.random.default_rng(seed)
+    forward = np.arange(m) % 2  # tasks alternate, so train and test halves both see each
+    reveal = rng.integers(10, 50, m)
+    exact = np.full((t_len, m, 2), 0.5)
+    for i in range(m):
+        exact[reveal[i] :, i] = np.eye(2)[forward[i]]
+    return exact
+
+
+def test_belief_probe_is_perfect_on_the_exact_belief_and_blind_without_features():
+    from evaluation.probe import belief_quality
+
+    exact = _exact_beliefs()
+    perfect = belief_quality(exact + 1e-3 * np.random.default_rng(1).normal(size=exact.shape), exact)
+    assert perfect["probe_kl_after"] < 0.05 and perfect["probe_accuracy_after"] == 1.0
+    assert perfect["probe_kl_before"] < 0.05  # the prior is recognised as the prior too
+    blind = belief_quality(np.zeros((*exact.shape[:2], 0)), exact)  # e.g. the Markov agent: no features
+    assert blind["probe_kl_after"] > 0.4  # it can only guess the marginal (KL ≈ ln 2 after the reveal)
+    assert 0.0 < blind["informed_fraction"] == perfect["informed_fraction"] < 1.0
+
+
+def test_bayes_optimal_estimate_by_hand():
+    from evaluation.report import bayes_optimal_estimate
+
+    got = bayes_optimal_estimate(np.array([300.0, 50.0, -10.0]), zone_radius=5.0, control_timestep=0.05)
+    assert got == pytest.approx(((300 - 100) + (50 - 25) + (-10)) / 3)
