@@ -256,3 +256,30 @@ def test_bayes_optimal_estimate_by_hand():
 
     got = bayes_optimal_estimate(np.array([300.0, 50.0, -10.0]), zone_radius=5.0, control_timestep=0.05)
     assert got == pytest.approx(((300 - 100) + (50 - 25) + (-10)) / 3)
+
+
+def test_figure_2_config_is_valid():
+    """bench/reproduce_fig2.sh's config maps onto the presets (a typo would only show hours later)."""
+    from evaluation.run import build_grid, parse_args
+
+    script = (ROOT / "bench" / "reproduce_fig2.sh").read_text()
+    agents_line = next(line for line in script.splitlines() if "--agents" in line)
+    presets = agents_line.split("--agents")[1].split("\\")[0].split()
+    args = parse_args(
+        [
+            "--agents",
+            *presets,
+            "--tasks",
+            "cheetah_dir_sparse",
+            "--frames",
+            "1000",
+            "--out",
+            "unused",
+            "--config",
+            str(ROOT / "bench" / "fig2.toml"),
+        ]
+    )
+    names, overrides = build_grid(args)
+    assert set(presets) == {"oracle", "oracle_rs", "oracle_rh", "varibad", "varibad_rh", "hyperx"}
+    assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 32
+    assert all(o["physics_threads"] == 1 for o in overrides.values())

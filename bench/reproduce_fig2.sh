@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# Reproduce the paper's Figure 2 on cheetah_dir_sparse: 6 presets x 3 seeds (+ the task-aware reference).
+#   bash bench/reproduce_fig2.sh [FRAMES] [OUT]
+# Resumable: rerun the same command after an interruption (it passes --resume when OUT exists).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+FRAMES=${1:-5000000}
+OUT=${2:-runs/fig2}
+RESUME=()
+[ -f "$OUT/grid.json" ] && RESUME=(--resume)
+MUJOCO_GL=disable .venv/bin/python evaluation/run.py \
+  --agents oracle oracle_rs oracle_rh varibad varibad_rh hyperx \
+  --tasks cheetah_dir_sparse --seeds 0 1 2 \
+  --frames "$FRAMES" --eval-every $((FRAMES / 20)) --eval-tasks 20 \
+  --config bench/fig2.toml --workers 2 --out "$OUT" "${RESUME[@]}"
