@@ -43,6 +43,7 @@ class CellSpec:
     resume: bool
     progress: bool = True
     position: int = 0
+    imports: tuple[str, ...] = ()  # user modules that register tasks, imported in the worker first
 
     @property
     def cell_id(self) -> str:
@@ -88,6 +89,27 @@ def versions() -> dict:
     return out
 
 
+def import_modules(names: tuple[str, ...] | list[str]) -> None:
+    """Imports modules by name or .py path (user tasks register themselves with suite on import)."""
+    import importlib
+    import importlib.util
+    import sys
+
+    for name in names:
+        if name.endswith(".py"):
+            module_name = Path(name).stem
+            if module_name in sys.modules:
+                continue
+            spec = importlib.util.spec_from_file_location(module_name, name)
+            if spec is None or spec.loader is None:
+                raise ImportError(f"cannot import {name}")
+            module = importlib.util.module_from_spec(spec)
+            sys.modules[module_name] = module
+            spec.loader.exec_module(module)
+        else:
+            importlib.import_module(name)
+
+
 def make_agent(spec: CellSpec):
     """The cell's agent, with checkpoints aligned to evaluation points (so resume rejoins the curve)."""
     agent = agents.make(spec.agent, **spec.overrides)
@@ -101,6 +123,7 @@ def run_cell(spec: CellSpec) -> dict:
     import torch  # noqa: F401  (imported here so that worker processes set their own threads)
     from torch.utils.tensorboard import SummaryWriter
 
+    import_modules(spec.imports)
     directory = spec.directory
     directory.mkdir(parents=True, exist_ok=True)
     record_path = directory / "record.json"

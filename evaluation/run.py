@@ -22,7 +22,7 @@ from pathlib import Path
 
 import agents
 import suite
-from evaluation.cell import CellSpec, load_records, run_cell, write_json_atomic, write_results
+from evaluation.cell import CellSpec, import_modules, load_records, run_cell, write_json_atomic, write_results
 from evaluation.report import REFERENCE_AGENT, text_table, write_figures, write_summary
 
 
@@ -69,6 +69,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="FILE",
         help="TOML or YAML overrides: a table per preset name, and/or 'all' for every agent, "
         'mapping dotted config fields to values (e.g. [all] "ppo.num_envs" = 32)',
+    )
+    p.add_argument(
+        "--import",
+        dest="imports",
+        nargs="+",
+        default=[],
+        metavar="MODULE",
+        help="modules or .py files to import first, e.g. your own tasks registered with suite.register "
+        "(imported in every worker too)",
     )
     p.add_argument(
         "--no-reference",
@@ -118,6 +127,10 @@ def load_config_file(path: Path | None) -> dict:
 
 def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
     """Validates names and overrides; returns the agent list and each agent's overrides."""
+    try:
+        import_modules(args.imports)
+    except Exception as e:  # noqa: BLE001  (any failure of user code is reported as a usage error)
+        raise UsageError(f"--import: {type(e).__name__}: {e}") from None
     if args.frames <= 0:
         raise UsageError(f"--frames must be positive, got {args.frames}")
     for name in args.tasks:
@@ -247,6 +260,7 @@ def main(argv: list[str] | None = None) -> int:
                 args.resume,
                 not args.no_progress,
                 i + 1,
+                tuple(args.imports),
             )
         )
     started = time.perf_counter()

@@ -7,11 +7,13 @@ is the fallback for tasks that register no fast batch: same interface, dm_contro
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Sequence
 from typing import Protocol
 
 import dm_env
+import mujoco
 import numpy as np
 from dm_env import specs
 
@@ -115,10 +117,31 @@ class LoopBatch:
             env.task.force_task(None if tasks is None else tasks[i])
 
     def state_dict(self) -> dict:
-        raise NotImplementedError(
-            "LoopBatch cannot snapshot dm_control environments; register a fast batch for this task "
-            "(suite.register(name, batch=...)) to checkpoint and resume training"
-        )
+        """Snapshot of every environment: full MuJoCo integration state, task attributes, step counters."""
+        snapshot = []
+        for env in self._envs:
+            physics = env.physics
+            spec = mujoco.mjtState.mjSTATE_INTEGRATION
+            state = np.empty(mujoco.mj_stateSize(physics.model.ptr, spec))
+            mujoco.mj_getState(physics.model.ptr, physics.data.ptr, state, spec)
+            snapshot.append(
+                {
+                    "physics": state,
+                    "task": copy.deepcopy(env.task.__dict__),
+                    "counters": (env._step_count, env._reset_next_step),
+                }
+            )
+        return {"envs": snapshot}
+
+    def load_state_dict(self, state: dict) -> None:
+        for env, saved in zip(self._envs, state["envs"], strict=True):
+            physics = env.physics
+            mujoco.mj_setState(
+                physics.model.ptr, physics.data.ptr, saved["physics"], mujoco.mjtState.mjSTATE_INTEGRATION
+            )
+            mujoco.mj_forward(physics.model.ptr, physics.data.ptr)
+            env.task.__dict__.update(copy.deepcopy(saved["task"]))
+            env._step_count, env._reset_next_step = saved["counters"]
 
     def close(self) -> None:
         for env in self._envs:

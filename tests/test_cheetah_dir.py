@@ -369,3 +369,30 @@ def test_zone_exploration_metrics_on_known_trajectories():
     # The dense task has no zone: every deployment "leaves" it on its first step.
     dense = suite.exploration_metrics("cheetah_dir")({"x_displacement": x}, np.zeros((4, 4)), tasks)
     np.testing.assert_array_equal(dense["first_exit_step"], [1, 1, 1, 1])
+
+
+def test_loop_batch_snapshot_restores_exactly():
+    def make():
+        return suite.LoopBatch(
+            [
+                suite.load("cheetah_dir_sparse", seed=s, privileged=True, episode_length=30)
+                for s in suite.spawn_seeds(4, 2)
+            ]
+        )
+
+    rng = np.random.default_rng(0)
+    actions = rng.uniform(-1, 1, (70, 2, 6))
+    original = make()
+    original.reset()
+    for a in actions[:40]:
+        original.step(a)
+    snapshot = original.state_dict()
+    expected = [original.step(a) for a in actions[40:]]
+    restored = make()
+    restored.reset()
+    restored.load_state_dict(snapshot)
+    for a, want in zip(actions[40:], expected, strict=True):
+        got = restored.step(a)
+        np.testing.assert_array_equal(got.reward, want.reward)
+        for k in want.observation:
+            np.testing.assert_array_equal(got.observation[k], want.observation[k])
