@@ -147,7 +147,11 @@ class OracleBelief(_Stateless):
 
 
 class RecurrentBelief:
-    """RL²: a GRU over (s_{t+1}, a_t, r_t) whose hidden state (ReLU) is the policy's task summary."""
+    """RL²: a GRU over (s_{t+1}, a_t, r_t) whose hidden state (ReLU) is the policy's task summary.
+
+    The hidden state is kept across MDP episodes and reset only at BAMDP starts; the MDP-episode
+    boundary (RL²'s "done" input) reaches the GRU through the `inner_episode` observation in s_{t+1}.
+    """
 
     name = "recurrent"
 
