@@ -252,8 +252,14 @@ class Agent:
         start_iteration, elapsed = 0, 0.0
         if resume and ckpt is not None and ckpt.exists():
             saved = torch.load(ckpt, weights_only=False)
-            if saved["config"] != config_lib.to_dict(cfg) or saved["task"] != task or saved["seed"] != seed:
-                raise ValueError(f"checkpoint {ckpt} was written by a different run (config, task or seed differ)")
+            same = (saved["config"], saved["task"], saved["seed"], saved["frames"]) == (
+                config_lib.to_dict(cfg),
+                task,
+                seed,
+                self.total_frames,
+            )
+            if not same:
+                raise ValueError(f"checkpoint {ckpt} was written by a different run (config, task, seed or frames)")
             self._load_training_state(saved, env, ext_scaler, bonus_scalers, buffer)
             carry, history, start_iteration = saved["carry"], saved["history"], saved["iteration"]
             elapsed = history[-1]["wall_seconds"] if history else 0.0
@@ -491,6 +497,7 @@ class Agent:
             "config": config_lib.to_dict(self.config),
             "task": task,
             "seed": seed,
+            "frames": self.total_frames,
             "iteration": iteration,
             "modules": self._modules_state(),
             "optimizer": self.optimizer.state_dict(),

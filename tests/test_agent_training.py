@@ -113,6 +113,17 @@ def test_resume_refuses_a_checkpoint_from_another_run(tmp_path):
             checkpoint_dir=tmp_path,
             resume=True,
         )
+    longer = agents.make("oracle", **TINY)  # a different budget changes the LR schedule: not the same run
+    with pytest.raises(ValueError, match="different run"):
+        longer.train(
+            "cheetah_dir_sparse",
+            frames=400,
+            seed=0,
+            task_kwargs=TINY_TASK,
+            progress=False,
+            checkpoint_dir=tmp_path,
+            resume=True,
+        )
 
 
 def test_clear_errors():
