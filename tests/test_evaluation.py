@@ -281,5 +281,6 @@ def test_figure_2_config_is_valid():
     )
     names, overrides = build_grid(args)
     assert set(presets) == {"oracle", "oracle_rs", "oracle_rh", "varibad", "varibad_rh", "hyperx"}
-    assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 32
+    assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 4
+    assert all(o["ppo.entropy_coef"] == 0.01 for o in overrides.values())
     assert all(o["physics_threads"] == 1 for o in overrides.values())
