@@ -155,6 +155,12 @@ def test_bad_config_field_and_foreign_out_dir(tmp_path, tiny_config):
         ["--agents", "oracle", "--tasks", "cheetah_dir", "--frames", 100, "--config", bad, "--out", tmp_path / "o"]
     )
     assert proc.returncode == 2 and "ppo.lrr" in proc.stderr and "did you mean ppo.lr" in proc.stderr
+    typo = tmp_path / "typo.toml"
+    typo.write_text('[orcale]\n"ppo.lr" = 0.1\n')
+    proc = run(
+        ["--agents", "oracle", "--tasks", "cheetah_dir", "--frames", 100, "--config", typo, "--out", tmp_path / "o"]
+    )
+    assert proc.returncode == 2 and "unknown presets: orcale" in proc.stderr
     out = tmp_path / "grid"
     grid = f"--agents oracle --tasks cheetah_dir --config {tiny_config} --no-reference --eval-tasks 2 --out {out}"
     args = [*grid.split(), "--no-progress", "--frames", "200"]
