@@ -275,6 +275,13 @@ def gaussian_kl(mean_q, logvar_q, mean_p, logvar_p) -> torch.Tensor:
     )
 
 
+def kl_to_previous(mean: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
+    """(B, T+1) KL of each posterior to the one before it, the first to N(0, I) (eq. 7)."""
+    prev_mean = torch.cat([torch.zeros_like(mean[:, :1]), mean[:, :-1]], dim=1)
+    prev_logvar = torch.cat([torch.zeros_like(logvar[:, :1]), logvar[:, :-1]], dim=1)
+    return gaussian_kl(mean, logvar, prev_mean, prev_logvar)
+
+
 class VariBADBelief:
     """variBAD: the posterior of a VAE over the task, trained with the ELBO of eq. (7)."""
 
@@ -342,10 +349,7 @@ class VariBADBelief:
         s, a, r = trajectories.states, trajectories.actions, trajectories.rewards
         mean, logvar = self.encoder.sequence(a, r, s[:, 1:])  # (B, T+1, L)
         t_len = a.shape[1]
-        # KL of each posterior to the one before (the first to N(0, I)), eq. (7).
-        prev_mean = torch.cat([torch.zeros_like(mean[:, :1]), mean[:, :-1]], dim=1)
-        prev_logvar = torch.cat([torch.zeros_like(logvar[:, :1]), logvar[:, :-1]], dim=1)
-        kl = gaussian_kl(mean, logvar, prev_mean, prev_logvar)  # (B, T+1)
+        kl = kl_to_previous(mean, logvar)  # (B, T+1)
         elbo_t = self._subsample(t_len + 1, self.config.subsample_elbos)
         dec_j = self._subsample(t_len, self.config.subsample_decodes)
         z = self.sample_latent(mean[:, elbo_t], logvar[:, elbo_t])  # (B, E, L)
@@ -401,9 +405,7 @@ class TaskSupervisedBelief(VariBADBelief):
         if trajectories.tasks is None:
             raise ValueError("task_supervised needs the task's privileged `task` observation")
         mean, logvar = self.encoder.sequence(a, r, s[:, 1:])
-        prev_mean = torch.cat([torch.zeros_like(mean[:, :1]), mean[:, :-1]], dim=1)
-        prev_logvar = torch.cat([torch.zeros_like(logvar[:, :1]), logvar[:, :-1]], dim=1)
-        kl = gaussian_kl(mean, logvar, prev_mean, prev_logvar)
+        kl = kl_to_previous(mean, logvar)
         elbo_t = self._subsample(a.shape[1] + 1, self.config.subsample_elbos)
         pred = self.decoder(self.sample_latent(mean[:, elbo_t], logvar[:, elbo_t]))
         error = (pred - trajectories.tasks[:, None]).pow(2).sum(-1).mean()
