@@ -295,13 +295,10 @@ class CheetahDirectionBatch:
                 self._reset_mdp()
             else:
                 last[:] = True
-        obs = self._observation()
+        obs = final = self._observation()
         if last[0]:
-            final = obs
             self._reset_bamdp()
             obs = self._observation()
-        else:
-            final = obs
         return BatchStep(obs, reward, np.ones(n), last, final)
 
     def state_dict(self) -> dict:

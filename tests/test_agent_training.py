@@ -98,32 +98,14 @@ def test_resume_from_checkpoint_equals_uninterrupted_run(preset, tmp_path):
 
 
 def test_resume_refuses_a_checkpoint_from_another_run(tmp_path):
-    agent = agents.make("oracle", **TINY)
-    agent.train(
-        "cheetah_dir_sparse", frames=200, seed=0, task_kwargs=TINY_TASK, progress=False, checkpoint_dir=tmp_path
-    )
+    run = {"seed": 0, "task_kwargs": TINY_TASK, "progress": False, "checkpoint_dir": tmp_path}
+    agents.make("oracle", **TINY).train("cheetah_dir_sparse", frames=200, **run)
     other = agents.make("oracle", **{**TINY, "ppo.lr": 1e-3})
     with pytest.raises(ValueError, match="different run"):
-        other.train(
-            "cheetah_dir_sparse",
-            frames=200,
-            seed=0,
-            task_kwargs=TINY_TASK,
-            progress=False,
-            checkpoint_dir=tmp_path,
-            resume=True,
-        )
+        other.train("cheetah_dir_sparse", frames=200, **run, resume=True)
     longer = agents.make("oracle", **TINY)  # a different budget changes the LR schedule: not the same run
     with pytest.raises(ValueError, match="different run"):
-        longer.train(
-            "cheetah_dir_sparse",
-            frames=400,
-            seed=0,
-            task_kwargs=TINY_TASK,
-            progress=False,
-            checkpoint_dir=tmp_path,
-            resume=True,
-        )
+        longer.train("cheetah_dir_sparse", frames=400, **run, resume=True)
 
 
 def test_clear_errors():
