@@ -34,26 +34,11 @@ SUMMARY_FIELDS = [
 METRICS = ("left_zone", "first_exit_step", "correct_direction", "stuck", "probe_kl_after", "probe_accuracy_after")
 
 
-def bayes_optimal_estimate(reference_returns: np.ndarray, zone_radius: float, control_timestep: float) -> float:
-    """Estimated Bayes-optimal online return on a zone task, from the task-aware reference's returns.
-
-    A Bayes-optimal agent exits the zone on one side; half the time that side is wrong, and it turns at
-    once and crosses back, 2 × zone_radius metres, during which it earns nothing. At the reference's
-    pace each metre is worth 1 / control_timestep reward (reward = velocity per step), so the detour costs
-    min(R, 2 · zone_radius / control_timestep) of a deployment's return R. Turning around is taken as
-    free, so this is an optimistic (upper) estimate: the mean over deployments of R − ½ · detour.
-    """
-    r = np.asarray(reference_returns, dtype=float)
-    detour = np.minimum(np.maximum(r, 0.0), 2.0 * zone_radius / control_timestep)
-    return float(np.mean(r - 0.5 * detour))
-
-
-def _zone(task: str) -> tuple[float, float] | None:
+def _bayes_estimator(task: str):
+    """The task's Bayes-optimal return estimator (from task-aware reference returns), or None."""
     import suite
 
-    env = suite.load(task, seed=0)
-    zone = getattr(env.task, "zone_radius", None)
-    return None if not zone else (float(zone), float(env.control_timestep()))
+    return getattr(suite.load(task, seed=0).task, "bayes_optimal_estimate", None)
 
 
 def _by_agent_task(records: list[dict]) -> dict[tuple[str, str], list[dict]]:
@@ -73,11 +58,11 @@ def summary_rows(records: list[dict]) -> list[dict]:
         low, high = bootstrap_ci(returns)
         reference = groups.get((REFERENCE_AGENT, task))
         ref = float(np.mean([r["final"]["online_return"] for r in reference])) if reference else None
-        zone = _zone(task)
+        estimator = _bayes_estimator(task)
         bayes = None
-        if reference and zone:
+        if reference and estimator is not None:
             per_task = np.concatenate([r["final"]["online_return_per_task"] for r in reference])
-            bayes = bayes_optimal_estimate(per_task, *zone)
+            bayes = estimator(per_task)
         coverage = [r["curve"][-1].get("coverage") for r in cell if r["curve"]]
         coverage = [c for c in coverage if c is not None]
         row = {

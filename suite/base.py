@@ -77,9 +77,10 @@ class MetaTask(base.Task):
         return self._task.copy()
 
     @property
-    def belief(self) -> np.ndarray:
-        """Privileged: the exact posterior over the prior's support given everything observed so far."""
-        return self._belief.copy()
+    def belief(self) -> np.ndarray | None:
+        """Privileged: the exact posterior over the prior's support given everything observed so far
+        (None for tasks without an exact belief)."""
+        return None if self._belief is None else self._belief.copy()
 
     @property
     def inner_episode(self) -> int:
@@ -93,7 +94,9 @@ class MetaTask(base.Task):
         return self._forced_task.copy() if self._forced_task is not None else self._prior.sample(self._rng)
 
     # Subclass hooks -----------------------------------------------------------------------------
-    def prior_belief(self) -> np.ndarray:
+    def prior_belief(self) -> np.ndarray | None:
+        """The belief before anything is observed; None if the task has no exact belief (then the
+        privileged observations hold the true task but no `belief`)."""
         raise NotImplementedError
 
     def initialize_mdp_episode(self, physics) -> None:
@@ -140,7 +143,8 @@ class MetaTask(base.Task):
         obs = self.mdp_observation(physics)
         obs["inner_episode"] = np.zeros(1)
         if self.privileged:
-            obs["belief"] = self.prior_belief()
+            if self.prior_belief() is not None:
+                obs["belief"] = self.prior_belief()
             obs["task"] = np.asarray(self._prior.sample(np.random.default_rng(0)), dtype=np.float64)
         return collections.OrderedDict((k, specs.Array(v.shape, v.dtype, name=k)) for k, v in obs.items())
 
@@ -148,7 +152,8 @@ class MetaTask(base.Task):
         obs = self.mdp_observation(physics)
         obs["inner_episode"] = np.array([float(self._inner_episode)])
         if self.privileged:
-            obs["belief"] = self._belief.copy()
+            if self._belief is not None:
+                obs["belief"] = self._belief.copy()
             obs["task"] = self._task.copy()
         return obs
 

@@ -258,10 +258,12 @@ def test_belief_probe_is_perfect_on_the_exact_belief_and_blind_without_features(
 
 
 def test_bayes_optimal_estimate_by_hand():
-    from evaluation.report import bayes_optimal_estimate
+    from suite.cheetah_dir import bayes_optimal_estimate
 
-    got = bayes_optimal_estimate(np.array([300.0, 50.0, -10.0]), zone_radius=5.0, control_timestep=0.05)
-    assert got == pytest.approx(((300 - 100) + (50 - 25) + (-10)) / 3)
+    got = bayes_optimal_estimate(np.array([300.0, 50.0, -10.0]), zone_radius=5.0)
+    assert got == pytest.approx(((300 - 100) + (50 - 25) + (-10)) / 3)  # detour 2 * 5 m / 0.05 s = 200
+    # The report asks the task: only cheetah-direction tasks define the estimate.
+    assert suite.load("cheetah_dir_sparse", seed=0).task.bayes_optimal_estimate([300.0]) == pytest.approx(200.0)
 
 
 def test_figure_2_config_is_valid():
