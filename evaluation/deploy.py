@@ -93,6 +93,7 @@ def deployment_metrics(deployment: Deployment, task: str, probe: bool = False) -
     declared = suite.exploration_metrics(task)
     if declared is not None:
         values = declared(deployment.observations, deployment.rewards, deployment.tasks)
+        metrics["exploration_metric_names"] = sorted(values)
         for name, v in values.items():
             v = np.asarray(v, dtype=float)
             finite = v[np.isfinite(v)]

@@ -79,21 +79,29 @@ def summary_rows(records: list[dict]) -> list[dict]:
             "gap_to_bayes": None if bayes is None else bayes - float(returns.mean()),
             "final_coverage": float(np.mean(coverage)) if coverage else None,
         }
-        for metric in METRICS:
+        for metric in METRICS + _task_metric_names(cell):
             values = [r["final"].get(metric) for r in cell if r["final"].get(metric) is not None]
             row[metric] = float(np.mean(values)) if values else None
         rows.append(row)
     return rows
 
 
+def _task_metric_names(cell: list[dict]) -> tuple[str, ...]:
+    """Exploration metrics a task declares beyond the cheetah-direction ones (e.g. `goal_reached`)."""
+    names = {n for r in cell for n in r["final"].get("exploration_metric_names", ())}
+    return tuple(sorted(names - set(METRICS)))
+
+
 def write_summary(out: Path, records: list[dict]) -> list[dict]:
     rows = summary_rows(records)
+    extra = sorted({k for row in rows for k in row} - set(SUMMARY_FIELDS))
+    fields = SUMMARY_FIELDS + extra  # task-specific metrics go last
     tmp = out / "summary.csv.tmp"
     with tmp.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=SUMMARY_FIELDS)
+        writer = csv.DictWriter(f, fieldnames=fields)
         writer.writeheader()
         for row in rows:
-            writer.writerow({k: "" if row[k] is None else row[k] for k in SUMMARY_FIELDS})
+            writer.writerow({k: "" if row.get(k) is None else row[k] for k in fields})
     tmp.replace(out / "summary.csv")
     return rows
 

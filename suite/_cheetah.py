@@ -58,13 +58,15 @@ class CheetahZoneTask(MetaTask):
         zone_radius: float = ZONE_RADIUS,
         ctrl_cost_weight: float = CTRL_COST_WEIGHT,
         task: np.ndarray | float | None = None,
+        episode_length: int = EPISODE_LENGTH,
+        episodes_per_task: int = 1,
         **kwargs,
     ):
         if zone_radius < 0:
             raise ValueError(f"zone_radius must be >= 0, got {zone_radius}")
         if ctrl_cost_weight < 0:
             raise ValueError(f"ctrl_cost_weight must be >= 0, got {ctrl_cost_weight}")
-        super().__init__(prior, task=task, **kwargs)
+        super().__init__(prior, task=task, episode_length=episode_length, episodes_per_task=episodes_per_task, **kwargs)
         self.zone_radius = float(zone_radius)
         self.ctrl_cost_weight = float(ctrl_cost_weight)
         self._x0 = 0.0

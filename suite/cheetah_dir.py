@@ -105,8 +105,6 @@ class CheetahDirectionBatch(CheetahZoneBatch):
     """`num_envs` copies of `CheetahDirection` on one `mujoco.batch.Batch`, reset together."""
 
     def __init__(self, num_envs: int, seed: SeedLike = None, *, num_threads: int = 0, **task_kwargs):
-        task_kwargs.setdefault("episode_length", EPISODE_LENGTH)
-        task_kwargs.setdefault("episodes_per_task", 1)
         super().__init__(num_envs, seed, lambda s: CheetahDirection(random=s, **task_kwargs), num_threads=num_threads)
 
     def zone_reward(self, vx: np.ndarray, outside: np.ndarray) -> np.ndarray:

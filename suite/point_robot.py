@@ -1,0 +1,409 @@
+"""Point-robot navigation meta-tasks: find a goal on a half circle, rewarded only near it.
+
+The robot is a point mass on a plane, moved by two motors (x, y) against viscous damping, so its
+velocity follows the action with a 0.2 s time constant up to 2 m/s (0.1 m per control step of
+0.05 s); it starts every MDP episode at rest at the origin, inside a ±1.5 m arena.
+Task prior: goal g on the upper half circle of radius 1, angle ~ Uniform[0, π]; with `num_goals` the
+prior is uniform over that many evenly spaced angles (0 and π included) and the task exposes an exact
+belief over them.
+Reward per control step: sparse (`point_robot_sparse`, `point_treasure_sparse`): 1 if the robot ends the
+step within `goal_radius` (0.2 m) of g, else 0; dense (`point_robot`): −‖p − g‖.
+Exact belief (finite prior only): the prior restricted to the goals whose reward at every visited
+position equals the observed one, renormalised — e.g. one rewarded step leaves only the goals within
+0.2 m of it, an unrewarded step removes them.
+`point_treasure_sparse`: 4 candidate goals and 2 MDP episodes of 50 steps per task, so exploring the
+candidates in episode 1 pays off in episode 2 (the task stays, the robot is reset).
+"""
+
+from __future__ import annotations
+
+import collections
+
+import mujoco
+import mujoco.batch
+import numpy as np
+from dm_control.mujoco import Physics as MjPhysics
+from dm_control.rl import control
+from dm_control.suite import base as suite_base
+from dm_env import specs
+
+from suite._batch import BatchStep, check_batch_action
+from suite._registry import register
+from suite._seeding import SeedLike, spawn_seeds
+from suite.base import MetaTask, check_action
+
+PHYSICS_TIMESTEP = 0.01
+N_SUB_STEPS = 5
+CONTROL_TIMESTEP = PHYSICS_TIMESTEP * N_SUB_STEPS
+EPISODE_LENGTH = 100  # control steps per MDP episode (5 s)
+GOAL_DISTANCE = 1.0  # radius of the half circle of goals (m)
+GOAL_RADIUS = 0.2  # the sparse reward is paid within this distance of the goal (m)
+ARENA = 1.5  # the slide joints are limited to ±ARENA (m)
+TREASURE_GOALS, TREASURE_EPISODE_LENGTH, TREASURE_EPISODES = 4, 50, 2
+
+MODEL_XML = f"""
+<mujoco model="point_robot">
+  <option timestep="{PHYSICS_TIMESTEP}"/>
+  <visual><global offwidth="640" offheight="480"/></visual>
+  <default>
+    <joint type="slide" damping="5" limited="true" range="-{ARENA} {ARENA}"/>
+    <motor gear="10" ctrlrange="-1 1" ctrllimited="true"/>
+    <geom contype="0" conaffinity="0"/>
+  </default>
+  <worldbody>
+    <light pos="0 0 4" dir="0 0 -1"/>
+    <camera name="top" pos="0 0.5 3.2" xyaxes="1 0 0 0 1 0"/>
+    <geom name="floor" type="plane" size="{ARENA + 0.1} {ARENA + 0.1} 0.1" rgba=".85 .85 .85 1"/>
+    <site name="goal" type="cylinder" size="{GOAL_RADIUS} 0.002" pos="1 0 0.002" rgba=".2 .7 .2 .6"/>
+    <body name="robot" pos="0 0 0.05">
+      <joint name="x" axis="1 0 0"/>
+      <joint name="y" axis="0 1 0"/>
+      <geom name="robot" type="sphere" size="0.05" mass="1" rgba=".8 .3 .3 1"/>
+    </body>
+  </worldbody>
+  <actuator>
+    <motor name="x" joint="x"/>
+    <motor name="y" joint="y"/>
+  </actuator>
+</mujoco>
+"""
+
+
+class HalfCircleGoalPrior:
+    """Goals on the upper half circle of radius `distance`: uniform angle, or `num_goals` evenly spaced."""
+
+    def __init__(self, distance: float = GOAL_DISTANCE, num_goals: int | None = None):
+        if num_goals is not None and (int(num_goals) != num_goals or num_goals < 1):
+            raise ValueError(f"num_goals must be a positive integer or None, got {num_goals!r}")
+        self.distance = float(distance)
+        self.num_goals = None if num_goals is None else int(num_goals)
+
+    def _at(self, angle) -> np.ndarray:
+        return self.distance * np.stack([np.cos(angle), np.sin(angle)], axis=-1)
+
+    def sample(self, rng: np.random.Generator) -> np.ndarray:
+        if self.num_goals is None:
+            return self._at(rng.uniform(0.0, np.pi))
+        return self.support()[rng.integers(self.num_goals)]
+
+    def support(self) -> np.ndarray | None:
+        if self.num_goals is None:
+            return None
+        return self._at(np.linspace(0.0, np.pi, self.num_goals) if self.num_goals > 1 else np.array([np.pi / 2]))
+
+    def probabilities(self) -> np.ndarray | None:
+        return None if self.num_goals is None else np.full(self.num_goals, 1.0 / self.num_goals)
+
+
+def goal_reward(position: np.ndarray, goal: np.ndarray, sparse: bool, goal_radius: float = GOAL_RADIUS) -> np.ndarray:
+    """Reward of ending a step at `position` (..., 2) when the goal is `goal` (..., 2); broadcasts."""
+    distance = np.linalg.norm(np.asarray(position) - np.asarray(goal), axis=-1)
+    return (distance <= goal_radius).astype(np.float64) if sparse else -distance
+
+
+def belief_update(
+    belief: np.ndarray, support: np.ndarray, position: np.ndarray, reward: np.ndarray, sparse: bool, goal_radius: float
+) -> np.ndarray:
+    """Exact Bayes update of beliefs (N, K) over `support` (K, 2) after ending steps at `position` (N, 2) with
+    `reward` (N,): rewards are deterministic given the goal, so the likelihood is 1 where the goal would
+    have paid exactly this reward and 0 elsewhere."""
+    predicted = goal_reward(position[:, None, :], support[None], sparse, goal_radius)  # (N, K)
+    posterior = belief * (np.abs(predicted - reward[:, None]) <= 1e-9)
+    return posterior / posterior.sum(axis=1, keepdims=True)
+
+
+class Physics(MjPhysics):
+    """Physics of the point robot."""
+
+    def robot_position(self) -> np.ndarray:
+        return self.data.qpos[:2].copy()
+
+
+class PointRobotGoal(MetaTask):
+    """A meta-task where the point robot must find a goal on a half circle; see the module docstring."""
+
+    def __init__(
+        self,
+        *,
+        sparse: bool = True,
+        goal_radius: float = GOAL_RADIUS,
+        num_goals: int | None = None,
+        goal: np.ndarray | None = None,
+        **kwargs,
+    ):
+        if goal_radius <= 0:
+            raise ValueError(f"goal_radius must be > 0, got {goal_radius}")
+        super().__init__(HalfCircleGoalPrior(num_goals=num_goals), task=goal, **kwargs)
+        self.sparse = bool(sparse)
+        self.goal_radius = float(goal_radius)
+        self._action_spec = None
+
+    @property
+    def goal(self) -> np.ndarray:
+        """Privileged: the true goal of the current task."""
+        return self._task.copy()
+
+    def force_task(self, task) -> None:
+        if task is not None:
+            task = np.asarray(task, dtype=np.float64)
+            if task.shape != (2,) or not np.all(np.isfinite(task)):
+                raise ValueError(f"goal must be a finite (x, y) pair or None, got {task!r}")
+            support = self._prior.support()
+            if support is not None and not np.any(np.all(np.isclose(support, task), axis=1)):
+                raise ValueError(
+                    f"goal {task.tolist()} is not one of the prior's {len(support)} goals: {support.tolist()}"
+                )
+        super().force_task(task)
+
+    def prior_belief(self) -> np.ndarray | None:
+        return self._prior.probabilities()
+
+    def initialize_episode(self, physics: Physics) -> None:
+        super().initialize_episode(physics)
+        physics.named.model.site_pos["goal", :2] = self._task  # only drawn, never simulated
+
+    def initialize_mdp_episode(self, physics: Physics) -> None:
+        physics.data.qpos[:] = 0.0
+        physics.data.qvel[:] = 0.0
+
+    def action_spec(self, physics: Physics):
+        if self._action_spec is None:
+            self._action_spec = suite_base.Task.action_spec(self, physics)
+        return self._action_spec
+
+    def before_step(self, action, physics: Physics) -> None:
+        spec = self.action_spec(physics)
+        physics.set_control(np.clip(check_action(action, spec), spec.minimum, spec.maximum))
+
+    def transition_reward(self, physics: Physics) -> float:
+        position = physics.robot_position()
+        reward = float(goal_reward(position, self._task, self.sparse, self.goal_radius))
+        if self._belief is not None:
+            support = self._prior.support()
+            self._belief = belief_update(
+                self._belief[None], support, position[None], np.array([reward]), self.sparse, self.goal_radius
+            )[0]
+        return reward
+
+    def mdp_observation(self, physics: Physics) -> collections.OrderedDict:
+        obs = collections.OrderedDict()
+        obs["position"] = physics.data.qpos[:2].copy()
+        obs["velocity"] = physics.data.qvel[:2].copy()
+        return obs
+
+
+class PointRobotBatch:
+    """`num_envs` copies of `PointRobotGoal` on one `mujoco.batch.Batch`, reset together."""
+
+    def __init__(self, num_envs: int, seed: SeedLike = None, *, num_threads: int = 0, **task_kwargs):
+        self._tasks = [PointRobotGoal(random=s, **task_kwargs) for s in spawn_seeds(seed, num_envs)]
+        first = self._tasks[0]
+        self.num_envs = num_envs
+        self.sparse, self.goal_radius = first.sparse, first.goal_radius
+        self.episode_length, self.episodes_per_task = first.episode_length, first.episodes_per_task
+        self.privileged = first.privileged
+        self._support = first.prior.support()
+        self._model = mujoco.MjModel.from_xml_string(MODEL_XML)
+        self._sim = mujoco.batch.Batch(self._model, nsim=num_envs, nthread=num_threads)
+        self._qpos = self._sim.bind("qpos")
+        self._qvel = self._sim.bind("qvel")
+        self._ctrl = self._sim.bind("ctrl")
+        self._action_spec = specs.BoundedArray(
+            (self._model.nu,),
+            np.float64,
+            self._model.actuator_ctrlrange[:, 0],
+            self._model.actuator_ctrlrange[:, 1],
+            name="action",
+        )
+        self._goal = np.zeros((num_envs, 2))
+        self._belief = None if self._support is None else np.zeros((num_envs, len(self._support)))
+        self._inner_episode = 0
+        self._inner_step = 0
+        self._started = False
+
+    def observation_spec(self) -> dict[str, specs.Array]:
+        return {k: specs.Array(v.shape[1:], v.dtype, name=k) for k, v in self._observation().items()}
+
+    def action_spec(self) -> specs.BoundedArray:
+        return self._action_spec
+
+    @property
+    def belief(self) -> np.ndarray | None:
+        """Privileged: exact beliefs of all copies, (num_envs, num_goals); None for the continuous prior."""
+        return None if self._belief is None else self._belief.copy()
+
+    @property
+    def task_parameters(self) -> np.ndarray:
+        """Privileged: the true goals, (num_envs, 2)."""
+        return self._goal.copy()
+
+    def set_tasks(self, tasks: np.ndarray | None) -> None:
+        """Forces copy i's goal to `tasks[i]` from the next reset on (None: sample from the prior again)."""
+        if tasks is not None and len(tasks) != self.num_envs:
+            raise ValueError(f"need one task per copy ({self.num_envs}), got {len(tasks)}")
+        for i, task in enumerate(self._tasks):
+            task.force_task(None if tasks is None else tasks[i])
+
+    def _reset_mdp(self) -> None:
+        self._sim.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)  # qpos0 = 0 (the origin), at rest
+
+    def _reset_bamdp(self) -> None:
+        self._goal = np.stack([task.sample_task() for task in self._tasks])
+        if self._belief is not None:
+            self._belief = np.tile(self._tasks[0].prior_belief(), (self.num_envs, 1))
+        self._inner_episode = 0
+        self._inner_step = 0
+        self._reset_mdp()
+
+    def _observation(self) -> dict[str, np.ndarray]:
+        obs = {
+            "position": self._qpos[:, :2].copy(),
+            "velocity": self._qvel[:, :2].copy(),
+            "inner_episode": np.full((self.num_envs, 1), float(self._inner_episode)),
+        }
+        if self.privileged:
+            if self._belief is not None:
+                obs["belief"] = self._belief.copy()
+            obs["task"] = self._goal.copy()
+        return obs
+
+    def reset(self) -> BatchStep:
+        self._reset_bamdp()
+        self._started = True
+        obs = self._observation()
+        n = self.num_envs
+        return BatchStep(obs, np.zeros(n), np.ones(n), np.zeros(n, bool), obs)
+
+    def step(self, action: np.ndarray) -> BatchStep:
+        if not self._started:
+            raise RuntimeError("call reset() before step()")
+        spec = self._action_spec
+        self._ctrl[:] = np.clip(check_batch_action(action, self.num_envs, spec), spec.minimum, spec.maximum)
+        self._sim.step(nstep=N_SUB_STEPS)
+        position = self._qpos[:, :2].copy()
+        reward = goal_reward(position, self._goal, self.sparse, self.goal_radius)
+        if self._belief is not None:
+            self._belief = belief_update(self._belief, self._support, position, reward, self.sparse, self.goal_radius)
+
+        self._inner_step += 1
+        n = self.num_envs
+        last = np.zeros(n, bool)
+        if self._inner_step == self.episode_length:
+            if self._inner_episode + 1 < self.episodes_per_task:
+                self._inner_episode += 1
+                self._inner_step = 0
+                self._reset_mdp()
+            else:
+                last[:] = True
+        obs = final = self._observation()
+        if last[0]:
+            self._reset_bamdp()
+            obs = self._observation()
+        return BatchStep(obs, reward, np.ones(n), last, final)
+
+    def state_dict(self) -> dict:
+        """Everything needed to continue exactly from here (physics rows, generators, goals, beliefs)."""
+        return {
+            "physics": np.array(self._sim.state, copy=True),
+            "generators": [task.random.bit_generator.state for task in self._tasks],
+            "goal": self._goal.copy(),
+            "belief": None if self._belief is None else self._belief.copy(),
+            "counters": (self._inner_episode, self._inner_step, self._started),
+        }
+
+    def load_state_dict(self, state: dict) -> None:
+        self._sim.state[...] = state["physics"]
+        for task, gen_state in zip(self._tasks, state["generators"], strict=True):
+            task.random.bit_generator.state = gen_state
+        self._goal = state["goal"].copy()
+        self._belief = None if state["belief"] is None else state["belief"].copy()
+        self._inner_episode, self._inner_step, self._started = state["counters"]
+
+    def close(self) -> None:
+        pass
+
+
+def goal_metrics(
+    observations: dict[str, np.ndarray],
+    rewards: np.ndarray,
+    tasks: np.ndarray,
+    goal_radius: float = GOAL_RADIUS,
+    **_: object,
+) -> dict[str, np.ndarray]:
+    """Deployed-exploration metrics of M deployments, one value per deployment: `goal_reached` (ever
+    within `goal_radius` of the goal), `first_goal_step` (1-based BAMDP step, NaN if never),
+    `last_episode_at_goal` (fraction of the last MDP episode's steps ending at the goal: exploitation)."""
+    distance = np.linalg.norm(observations["position"] - np.asarray(tasks)[None], axis=-1)  # (T, M)
+    at_goal = distance <= goal_radius
+    reached = at_goal.any(axis=0)
+    # MDP episodes have equal lengths; the step ending one already shows the next one's first observation,
+    # so the last MDP episode is the last T / episodes steps, not the steps observed in it.
+    episodes = int(observations["inner_episode"].max()) + 1
+    last_episode = at_goal[len(at_goal) - len(at_goal) // episodes :]
+    return {
+        "goal_reached": reached.astype(float),
+        "first_goal_step": np.where(reached, at_goal.argmax(axis=0) + 1.0, np.nan),
+        "last_episode_at_goal": last_episode.mean(axis=0),
+    }
+
+
+def _register(name: str, *, sparse: bool, num_goals: int | None, episode_length: int, episodes_per_task: int) -> None:
+    def factory(
+        seed: SeedLike = None,
+        *,
+        goal_radius: float = GOAL_RADIUS,
+        num_goals: int | None = num_goals,
+        goal: np.ndarray | None = None,
+        episodes_per_task: int = episodes_per_task,
+        episode_length: int = episode_length,
+        privileged: bool = False,
+    ) -> control.Environment:
+        task = PointRobotGoal(
+            sparse=sparse,
+            goal_radius=goal_radius,
+            num_goals=num_goals,
+            goal=goal,
+            episode_length=episode_length,
+            episodes_per_task=episodes_per_task,
+            privileged=privileged,
+            random=seed,
+        )
+        return control.Environment(Physics.from_xml_string(MODEL_XML), task, n_sub_steps=N_SUB_STEPS)
+
+    def batch_factory(
+        num_envs: int,
+        seed: SeedLike = None,
+        *,
+        num_goals: int | None = num_goals,
+        episodes_per_task: int = episodes_per_task,
+        episode_length: int = episode_length,
+        **kwargs,
+    ):
+        return PointRobotBatch(
+            num_envs,
+            seed,
+            sparse=sparse,
+            num_goals=num_goals,
+            episodes_per_task=episodes_per_task,
+            episode_length=episode_length,
+            **kwargs,
+        )
+
+    factory.__name__ = factory.__qualname__ = name
+    factory.__doc__ = f"`{name}`: point-robot goal meta-task (see suite.point_robot)."
+
+    def metrics(observations, rewards, tasks, goal_radius: float = GOAL_RADIUS, **_):
+        return goal_metrics(observations, rewards, tasks, goal_radius=goal_radius)
+
+    register(name, batch=batch_factory, metrics=metrics)(factory)
+
+
+_register("point_robot_sparse", sparse=True, num_goals=None, episode_length=EPISODE_LENGTH, episodes_per_task=1)
+_register("point_robot", sparse=False, num_goals=None, episode_length=EPISODE_LENGTH, episodes_per_task=1)
+_register(
+    "point_treasure_sparse",
+    sparse=True,
+    num_goals=TREASURE_GOALS,
+    episode_length=TREASURE_EPISODE_LENGTH,
+    episodes_per_task=TREASURE_EPISODES,
+)

@@ -1,0 +1,303 @@
+"""The task catalogue beyond cheetah-direction: point robot, treasure, cheetah velocity.
+
+Every task gets the same battery as cheetah_dir (dm_env conformance, specs, determinism, batched
+simulator equality step for step); each task's reward and belief are recomputed independently.
+"""
+
+import unittest
+
+import numpy as np
+import pytest
+from dm_env import test_utils
+
+import suite
+from suite.cheetah_vel import CheetahVelocity
+from suite.point_robot import HalfCircleGoalPrior, goal_metrics
+from suite.scripted import gait
+
+NEW_TASKS = {
+    # name: small kwargs for fast tests (short MDP episodes, two of them so inner resets are exercised)
+    "point_robot_sparse": {"episode_length": 20, "episodes_per_task": 2},
+    "point_robot": {"episode_length": 20},
+    "point_treasure_sparse": {"episode_length": 20},
+    "cheetah_vel_sparse": {"episode_length": 20, "episodes_per_task": 2},
+    "cheetah_vel": {"episode_length": 20},
+}
+
+
+def action_size(name: str) -> int:
+    return 6 if name.startswith("cheetah") else 2
+
+
+# dm_env conformance ------------------------------------------------------------------------------
+def _conformance_case(name: str, kwargs: dict) -> type:
+    class Case(test_utils.EnvironmentTestMixin, unittest.TestCase):
+        def make_object_under_test(self):
+            return suite.load(name, seed=0, privileged=True, **kwargs)
+
+        def make_action_sequence(self):
+            rng = np.random.default_rng(0)
+            for _ in range(2 * 20 * kwargs.get("episodes_per_task", 2) + 5):  # past a BAMDP end and reset
+                yield rng.uniform(-1, 1, action_size(name))
+
+    Case.__name__ = Case.__qualname__ = f"Conformance_{name}"
+    return Case
+
+
+for _name, _kwargs in NEW_TASKS.items():
+    globals()[f"Conformance_{_name}"] = _conformance_case(_name, _kwargs)
+
+
+@pytest.mark.parametrize("name", sorted(NEW_TASKS))
+def test_specs_finite_fresh_arrays_and_registration(name):
+    assert name in suite.TASKS
+    env = suite.load(name, seed=3, privileged=True, **NEW_TASKS[name])
+    spec = env.observation_spec()
+    previous = env.reset().observation
+    rng = np.random.default_rng(0)
+    for _ in range(45):
+        step = env.step(rng.uniform(-1, 1, action_size(name)))
+        assert isinstance(step.reward, float)
+        for k, v in step.observation.items():
+            spec[k].validate(v)
+            assert np.all(np.isfinite(v)), k
+            assert not np.shares_memory(v, previous[k]), k
+        previous = step.observation
+        if step.last():
+            previous = env.reset().observation
+    assert "task" in spec and ("belief" in spec) == (name == "point_treasure_sparse")
+
+
+@pytest.mark.parametrize("name", sorted(NEW_TASKS))
+def test_same_seed_same_trajectory_different_seed_different(name):
+    def trajectory(seed):
+        env = suite.load(name, seed=seed, privileged=True, **NEW_TASKS[name])
+        rng = np.random.default_rng(1)
+        ts = env.reset()
+        out = [np.concatenate([ts.observation["task"], ts.observation["position"]])]
+        for _ in range(15):
+            ts = env.step(rng.uniform(-1, 1, action_size(name)))
+            out.append(np.concatenate([[ts.reward], ts.observation["position"]]))
+        # The point robot always starts at the origin: its seed shows in the goals of later resets.
+        out += [env.reset().observation["task"] for _ in range(5)]
+        return np.concatenate(out)
+
+    np.testing.assert_array_equal(trajectory(4), trajectory(4))
+    assert not np.allclose(trajectory(4), trajectory(5))
+
+
+@pytest.mark.parametrize("name", sorted(NEW_TASKS))
+def test_batch_equals_dm_control_step_for_step(name):
+    n, seed, kwargs = 3, 11, NEW_TASKS[name]
+    vec = suite.batch(name, n, seed=seed, privileged=True, **kwargs)
+    envs = [suite.load(name, seed=s, privileged=True, **kwargs) for s in suite.spawn_seeds(seed, n)]
+    vec.reset()
+    for env in envs:
+        env.reset()
+    rng = np.random.default_rng(2)
+    steps = kwargs["episode_length"] * kwargs.get("episodes_per_task", suite.load(name, seed=0).task.episodes_per_task)
+    resets = 0
+    for t in range(steps + 7):
+        if name.startswith("cheetah"):  # one copy runs out of the zone, one acts randomly, one out of bounds
+            action = np.stack([gait(1.0)(t), rng.uniform(-1, 1, 6), rng.uniform(-2, 2, 6)])
+        else:  # one copy heads for the goals' half circle, the others wander
+            action = np.stack([[0.3, 1.0], rng.uniform(-1, 1, 2), rng.uniform(-2, 2, 2)])
+        out = vec.step(action)
+        for i, env in enumerate(envs):
+            step = env.step(action[i])
+            assert step.reward == out.reward[i]
+            assert step.last() == out.last[i]
+            for k, v in step.observation.items():
+                np.testing.assert_array_equal(out.final_observation[k][i], v, err_msg=k)
+            if step.last():
+                resets += 1
+                step = env.reset()
+            for k, v in step.observation.items():
+                np.testing.assert_array_equal(out.observation[k][i], v, err_msg=k)
+    assert resets == n
+    assert vec.observation_spec() == {k: v for k, v in envs[0].observation_spec().items()}
+
+
+@pytest.mark.parametrize("name", ["point_treasure_sparse", "cheetah_vel_sparse"])
+def test_batch_snapshot_restores_exactly(name):
+    vec = suite.batch(name, 2, seed=0, privileged=True, episode_length=10)
+    vec.reset()
+    rng = np.random.default_rng(0)
+    for _ in range(13):
+        vec.step(rng.uniform(-1, 1, (2, action_size(name))))
+    state = vec.state_dict()
+    actions = rng.uniform(-1, 1, (12, 2, action_size(name)))
+    first = [vec.step(a) for a in actions]
+    vec.load_state_dict(state)
+    second = [vec.step(a) for a in actions]
+    for a, b in zip(first, second, strict=True):
+        np.testing.assert_array_equal(a.reward, b.reward)
+        for k in a.observation:
+            np.testing.assert_array_equal(a.observation[k], b.observation[k])
+
+
+# Point robot -------------------------------------------------------------------------------------
+def drive_to(env, target, max_steps=60):
+    """Proportional controller towards `target`; returns the rewards of the steps taken until it arrives."""
+    rewards = []
+    for _ in range(max_steps):
+        error = np.asarray(target) - env.physics.named.data.qpos[["x", "y"]]
+        if np.linalg.norm(error) < 0.05:
+            break
+        rewards.append(env.step(np.clip(5.0 * error, -1, 1)).reward)
+    return rewards
+
+
+@pytest.mark.parametrize("name", ["point_robot_sparse", "point_robot"])
+def test_point_robot_reward_recomputed_from_physics(name):
+    env = suite.load(name, seed=7, privileged=True)
+    goal = env.reset().observation["task"]
+    assert np.linalg.norm(goal) == pytest.approx(1.0) and goal[1] >= 0.0  # on the upper half circle
+    rng = np.random.default_rng(0)
+    rewarded = 0
+    for t in range(100):
+        action = np.clip(3.0 * (goal - env.physics.data.qpos[:2]), -1, 1) if t > 40 else rng.uniform(-1, 1, 2)
+        step = env.step(action)
+        distance = np.hypot(*(env.physics.named.data.qpos[["x", "y"]] - goal))
+        expected = float(distance <= 0.2) if name == "point_robot_sparse" else -distance
+        assert step.reward == pytest.approx(expected, abs=1e-12)
+        rewarded += distance <= 0.2
+    assert rewarded > 20  # the controller reached the goal and stayed
+
+
+def test_point_robot_velocity_follows_the_action_with_a_time_constant():
+    """Damping 5, gear 10, mass 1: v(t) = 2 m/s · (1 − exp(−t / 0.2 s)) at full throttle; the arena stops it."""
+    env = suite.load("point_robot_sparse", seed=0, goal=[0.0, 1.0])
+    env.reset()
+    for _ in range(12):  # 0.6 s
+        env.step(np.array([1.0, 0.0]))
+    assert env.physics.data.qvel[0] == pytest.approx(2.0 * (1 - np.exp(-3.0)), rel=0.02)
+    assert env.physics.data.qpos[0] == pytest.approx(2.0 * (0.6 - 0.2 * (1 - np.exp(-3.0))), rel=0.03)
+    assert env.physics.data.qpos[1] == 0.0
+    for _ in range(40):
+        env.step(np.array([1.0, 0.0]))
+    assert env.physics.data.qpos[0] == pytest.approx(1.5, abs=0.02)  # pressed against the arena's edge
+
+
+def test_half_circle_prior_continuous_and_finite():
+    rng = np.random.default_rng(0)
+    goals = np.array([HalfCircleGoalPrior().sample(rng) for _ in range(4000)])
+    angles = np.arctan2(goals[:, 1], goals[:, 0])
+    np.testing.assert_allclose(np.linalg.norm(goals, axis=1), 1.0)
+    assert angles.min() >= 0 and angles.max() <= np.pi
+    assert np.histogram(angles, bins=4, range=(0, np.pi))[0].min() > 900  # uniform in angle
+    finite = HalfCircleGoalPrior(num_goals=4)
+    support = finite.support()
+    np.testing.assert_allclose(support, [[1, 0], [0.5, np.sqrt(3) / 2], [-0.5, np.sqrt(3) / 2], [-1, 0]], atol=1e-12)
+    draws = [int(np.argmin(np.linalg.norm(support - finite.sample(rng), axis=1))) for _ in range(4000)]
+    assert np.bincount(draws).min() > 900 and HalfCircleGoalPrior().support() is None
+
+
+def test_treasure_belief_eliminates_visited_candidates_and_is_held_across_episodes():
+    env = suite.load("point_treasure_sparse", seed=0, privileged=True, goal=[-0.5, np.sqrt(3) / 2])
+    support = env.task.prior.support()
+    ts = env.reset()
+    np.testing.assert_array_equal(ts.observation["belief"], [0.25] * 4)
+    drive_to(env, support[0])  # an empty candidate: ruled out
+    np.testing.assert_allclose(env.task.belief, [0, 1 / 3, 1 / 3, 1 / 3])
+    drive_to(env, support[1])
+    np.testing.assert_allclose(env.task.belief, [0, 0, 0.5, 0.5])
+    rewards = drive_to(env, support[2])  # the treasure
+    assert rewards[-1] == 1.0
+    np.testing.assert_array_equal(env.task.belief, [0, 0, 1, 0])
+    while env.task.inner_episode == 0:
+        ts = env.step(np.zeros(2))
+    np.testing.assert_array_equal(ts.observation["position"], [0, 0])  # the robot is reset ...
+    np.testing.assert_array_equal(ts.observation["belief"], [0, 0, 1, 0])  # ... the belief is not
+
+
+def test_treasure_exploring_in_episode_one_pays_off_in_episode_two():
+    """Bayes-adaptive behaviour (visit candidates until rewarded, then go straight back) earns more in
+    episode 2 than in episode 1, and more over both than always going to one candidate."""
+
+    def run(goal_index, policy):
+        env = suite.load("point_treasure_sparse", seed=0, privileged=True, goal=support[goal_index])
+        env.reset()
+        per_episode = [0.0, 0.0]
+        ts = None
+        while ts is None or not ts.last():
+            episode = env.task.inner_episode
+            target = policy(env.task.belief, episode)
+            error = target - env.physics.data.qpos[:2]
+            ts = env.step(np.clip(5.0 * error, -1, 1))
+            per_episode[episode] += ts.reward
+        return per_episode
+
+    support = HalfCircleGoalPrior(num_goals=4).support()
+    explore = lambda belief, episode: support[int(np.argmax(belief))]  # noqa: E731  first candidate left
+    fixed = lambda belief, episode: support[1]  # noqa: E731
+    adaptive = np.array([run(k, explore) for k in range(4)])
+    naive = np.array([run(k, fixed) for k in range(4)])
+    assert np.all(adaptive[:, 1] > 30)  # episode 2: straight to the treasure, about 40 of 50 steps there
+    assert adaptive[:, 1].mean() > adaptive[:, 0].mean() + 10
+    assert adaptive.sum(1).mean() > naive.sum(1).mean() + 20
+
+
+def test_goal_metrics_on_known_trajectories():
+    # 2 MDP episodes of 2 steps; deployment 0 reaches its goal in the second episode only, 1 never.
+    position = np.array(
+        [[[0.5, 0.0], [0.0, 0.0]], [[0.0, 0.0], [0.0, 0.0]], [[0.95, 0.1], [0.0, 0.5]], [[1.0, 0.0], [0.0, 0.5]]]
+    )
+    inner = np.array([0, 1, 1, 1], float)[:, None, None].repeat(2, 1)
+    tasks = np.array([[1.0, 0.0], [-1.0, 0.0]])
+    m = goal_metrics({"position": position, "inner_episode": inner}, np.zeros((4, 2)), tasks)
+    np.testing.assert_array_equal(m["goal_reached"], [1, 0])
+    np.testing.assert_array_equal(m["first_goal_step"], [3, np.nan])
+    np.testing.assert_array_equal(m["last_episode_at_goal"], [1.0, 0.0])
+
+
+# Cheetah velocity --------------------------------------------------------------------------------
+def test_cheetah_velocity_reward_recomputed_from_physics():
+    target = 2.0
+    env = suite.load("cheetah_vel_sparse", seed=2, target_velocity=target, privileged=True)
+    ts = env.reset()
+    assert ts.observation["task"][0] == target
+    x_start = float(env.physics.named.data.qpos["rootx"][0])
+    run = gait(1.0)
+    paid = 0
+    for t in range(200):
+        action = run(t)
+        x_before = float(env.physics.named.data.qpos["rootx"][0])
+        step = env.step(action)
+        x = float(env.physics.named.data.qpos["rootx"][0])
+        velocity = (x - x_before) / 0.05
+        outside = abs(x - x_start) >= 5.0
+        a = np.clip(action, -1, 1)
+        expected = (max(0.0, 1.0 - abs(velocity - target)) if outside else 0.0) - 0.05 * float(a @ a)
+        assert step.reward == pytest.approx(expected, abs=1e-12)
+        paid += outside and abs(velocity - target) < 1.0
+    assert paid > 0  # the scripted gait passes through the target speed somewhere outside the zone
+
+
+def test_cheetah_velocity_prior_and_arguments():
+    rng = np.random.default_rng(0)
+    task = CheetahVelocity(random=rng)
+    draws = np.array([task.prior.sample(rng)[0] for _ in range(4000)])
+    assert draws.min() >= 0 and draws.max() <= 3 and draws.mean() == pytest.approx(1.5, abs=0.05)
+    assert task.prior.support() is None and task.prior_belief() is None
+    narrow = suite.load("cheetah_vel_sparse", seed=0, velocity_range=(1.0, 1.0), privileged=True)
+    assert narrow.reset().observation["task"][0] == 1.0
+    with pytest.raises(ValueError, match="low <= high"):
+        suite.load("cheetah_vel_sparse", velocity_range=(2.0, 1.0))
+    with pytest.raises(ValueError, match="target_velocity"):
+        suite.load("cheetah_vel_sparse", target_velocity=[1.0, 2.0])
+    with pytest.raises(TypeError, match="direction"):
+        suite.load("cheetah_vel_sparse", direction=1.0)
+
+
+def test_point_robot_bad_arguments():
+    with pytest.raises(ValueError, match="not one of the prior's 4 goals"):
+        suite.load("point_treasure_sparse", goal=[0.0, 1.0])
+    with pytest.raises(ValueError, match="goal_radius"):
+        suite.load("point_robot_sparse", goal_radius=0.0)
+    with pytest.raises(ValueError, match="num_goals"):
+        suite.load("point_robot_sparse", num_goals=0)
+    env = suite.load("point_robot_sparse", seed=0)
+    env.reset()
+    with pytest.raises(ValueError, match=r"shape \(3,\), expected \(2,\)"):
+        env.step(np.zeros(3))
