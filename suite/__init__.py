@@ -6,7 +6,7 @@
 Register your own meta-task from your own module with `@suite.register("name")`.
 """
 
-from suite import cheetah_dir, cheetah_vel, point_robot  # noqa: F401  (register the built-in tasks)
+from suite import cheetah_dir, cheetah_vel, point_robot, quadruped_goal  # noqa: F401  (register the built-in tasks)
 from suite._batch import BatchEnv, BatchStep, LoopBatch
 from suite._registry import TASKS, batch, exploration_metrics, list_tasks, load, register, task_prior, unregister
 from suite._seeding import as_generator, spawn_seeds

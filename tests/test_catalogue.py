@@ -22,11 +22,12 @@ NEW_TASKS = {
     "point_treasure_sparse": {"episode_length": 20},
     "cheetah_vel_sparse": {"episode_length": 20, "episodes_per_task": 2},
     "cheetah_vel": {"episode_length": 20},
+    "quadruped_goal_sparse": {"episode_length": 20, "episodes_per_task": 2},
 }
 
 
 def action_size(name: str) -> int:
-    return 6 if name.startswith("cheetah") else 2
+    return {"cheetah": 6, "quadruped": 12}.get(name.split("_")[0], 2)
 
 
 # dm_env conformance ------------------------------------------------------------------------------
@@ -100,6 +101,8 @@ def test_batch_equals_dm_control_step_for_step(name):
     for t in range(steps + 7):
         if name.startswith("cheetah"):  # one copy runs out of the zone, one acts randomly, one out of bounds
             action = np.stack([gait(1.0)(t), rng.uniform(-1, 1, 6), rng.uniform(-2, 2, 6)])
+        elif name.startswith("quadruped"):
+            action = rng.uniform(-1.2, 1.2, (3, 12))
         else:  # one copy heads for the goals' half circle, the others wander
             action = np.stack([[0.3, 1.0], rng.uniform(-1, 1, 2), rng.uniform(-2, 2, 2)])
         out = vec.step(action)
@@ -301,3 +304,32 @@ def test_point_robot_bad_arguments():
     env.reset()
     with pytest.raises(ValueError, match=r"shape \(3,\), expected \(2,\)"):
         env.step(np.zeros(3))
+
+
+# Quadruped goal ----------------------------------------------------------------------------------
+@pytest.mark.parametrize("goal,radius", [([0.3, 0.0], 0.5), ([0.2, 0.1], 0.25), ([2.0, 0.0], 0.5)])
+def test_quadruped_reward_recomputed_from_torso_position(goal, radius):
+    env = suite.load("quadruped_goal_sparse", seed=1, goal=goal, goal_radius=radius, privileged=True)
+    ts = env.reset()
+    np.testing.assert_array_equal(ts.observation["task"], goal)
+    np.testing.assert_array_equal(ts.observation["position"], [0.0, 0.0])  # starts at the origin
+    assert ts.observation["torso_upright"] == pytest.approx(1.0)  # upright, random heading
+    rng = np.random.default_rng(0)
+    rewards = []
+    for _ in range(60):
+        step = env.step(rng.uniform(-1, 1, 12))
+        distance = np.hypot(*(env.physics.named.data.xpos["torso", :2] - goal))
+        assert step.reward == float(distance <= radius)
+        rewards.append(step.reward)
+    assert (sum(rewards) > 0) == (goal[0] < 1.0)  # random flailing stays near the start
+
+
+def test_quadruped_goal_prior_on_circle_and_random_headings():
+    headings = []
+    for seed in range(6):
+        env = suite.load("quadruped_goal_sparse", seed=seed, privileged=True)
+        obs = env.reset().observation
+        assert np.linalg.norm(obs["task"]) == pytest.approx(2.0)
+        headings.append(obs["heading"])
+    np.testing.assert_allclose(np.linalg.norm(headings, axis=1), 1.0, atol=1e-6)
+    assert np.ptp(np.arctan2(*np.array(headings).T[::-1])) > 1.0
