@@ -100,8 +100,9 @@ class Agent:
         self._built = False
 
     # Construction ----------------------------------------------------------------------------------
-    def _build(self, obs_spec: dict, action_spec, seed: int) -> None:
+    def _build(self, obs_spec: dict, action_spec, seed: int, position_keys: tuple[str, ...] | None = None) -> None:
         cfg = self.config
+        self.position_keys = position_keys
         torch.manual_seed(seed)
         self.generator = torch.Generator().manual_seed(seed)
         public = [k for k in obs_spec if k not in PRIVILEGED_KEYS]
@@ -134,6 +135,13 @@ class Agent:
         self.bonuses = []
         for i, b in enumerate(cfg.bonuses):
             keys = b.state_keys if b.state_keys is not None else self.state_keys
+            if keys == "task":
+                if position_keys is None:
+                    raise ValueError(
+                        f"bonus {i} reads the task's position keys (state_keys='task'), but the task declares "
+                        f"none; set bonuses.{i}.state_keys to some of {self.state_keys}"
+                    )
+                keys = position_keys
             missing = [k for k in keys if k not in self.key_columns]
             if missing:
                 raise ValueError(f"bonus {i}: state keys {missing} are not state observations {self.state_keys}")
@@ -202,6 +210,13 @@ class Agent:
         return self.belief.features(state.belief).numpy()
 
     # Training ---------------------------------------------------------------------------------------
+    def check_task(self, task: str, task_kwargs: dict | None = None) -> None:
+        """Raises ValueError (naming what is missing) if this agent cannot run on `task`, e.g. the
+        oracle belief on a task without an exact belief; builds nothing that training keeps."""
+        env = suite.load(task, seed=0, privileged=True, **(task_kwargs or {}))
+        probe = Agent(self.config, self.name)
+        probe._build(env.observation_spec(), env.action_spec(), 0, suite.position_keys(task))
+
     def train(
         self,
         task: str,
@@ -230,7 +245,7 @@ class Agent:
         env = suite.batch(
             task, p.num_envs, seed=seed, num_threads=cfg.physics_threads, privileged=True, **(task_kwargs or {})
         )
-        self._build(env.observation_spec(), env.action_spec(), seed)
+        self._build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(task))
         n, t_len = p.num_envs, p.rollout_length
         iterations = math.ceil(frames / (n * t_len))
         self.total_frames = iterations * n * t_len
@@ -538,6 +553,7 @@ class Agent:
                 "config": config_lib.to_dict(self.config),
                 "obs_spec": self.obs_spec,
                 "action_bounds": self.action_bounds,
+                "position_keys": self.position_keys,
                 "modules": self._modules_state(),
             },
             path,
@@ -552,6 +568,7 @@ class Agent:
         agent = cls(config_lib.from_dict(AgentConfig, saved["config"]), saved["name"])
         obs_spec = {k: specs.Array(shape, np.dtype(dtype), name=k) for k, (shape, dtype) in saved["obs_spec"].items()}
         low, high = saved["action_bounds"]
-        agent._build(obs_spec, specs.BoundedArray(low.shape, np.float64, low, high), seed=0)
+        bounds = specs.BoundedArray(low.shape, np.float64, low, high)
+        agent._build(obs_spec, bounds, seed=0, position_keys=saved.get("position_keys"))
         agent._load_modules_state(saved["modules"])
         return agent

@@ -71,7 +71,10 @@ class BonusConfig:
 
     kind: str = "rnd"
     input: str = "hyperstate"
-    state_keys: tuple[str, ...] | None = ("x_displacement",)  # None: every state key
+    # The state part of the bonus input. "task": the position keys the task declares (`x_displacement`
+    # for the cheetahs, `position` for the point robot and quadruped: the reference's RND sees only the
+    # cheetah's x-position); None: every state key; or a tuple of observation keys.
+    state_keys: tuple[str, ...] | str | None = "task"
     weight: float = 10.0  # λ in eq. (4)
     hidden: tuple[int, ...] = (256, 256)
     out_dim: int = 128
@@ -114,11 +117,18 @@ def from_dict(cls: type, data: dict) -> Any:
 
 def _agent_from_dict(data: dict) -> AgentConfig:
     data = dict(data)
-    bonuses = tuple(apply_overrides(BonusConfig(), b) for b in data.pop("bonuses", ()))
+    bonuses = tuple(apply_overrides(BonusConfig(), b, f"bonuses.{i}.") for i, b in enumerate(data.pop("bonuses", ())))
     return apply_overrides(dataclasses.replace(AgentConfig(), bonuses=bonuses), data)
 
 
 def _coerce(value: Any, current: Any, path: str) -> Any:
+    if path.endswith("state_keys"):  # a tuple of keys, None, or (bonuses) the sentinel "task"
+        if isinstance(value, (list, tuple)):
+            return tuple(value)
+        if value is None or (value == "task" and "bonuses" in path):
+            return value
+        allowed = 'a list of observation keys, "task" or null' if "bonuses" in path else "a list of keys or null"
+        raise ValueError(f"{path} must be {allowed}, got {value!r}")
     if isinstance(current, tuple) or (current is None and isinstance(value, list)):
         return tuple(value) if isinstance(value, (list, tuple)) else value
     if isinstance(current, bool):
@@ -169,7 +179,10 @@ def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") ->
 def _override_bonuses(current: tuple, direct: Any, sub: dict, path: str) -> tuple:
     bonuses = list(current)
     if direct is not dataclasses.MISSING:
-        bonuses = [b if isinstance(b, BonusConfig) else apply_overrides(BonusConfig(), b) for b in direct]
+        bonuses = [
+            b if isinstance(b, BonusConfig) else apply_overrides(BonusConfig(), b, f"{path}.{i}.")
+            for i, b in enumerate(direct)
+        ]
     per_index: dict[int, dict] = {}
     for key, value in sub.items():
         index, _, field = key.partition(".")

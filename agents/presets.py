@@ -10,8 +10,8 @@ import dataclasses
 
 from agents.config import AgentConfig, BonusConfig, PPOConfig
 
-STATE_BONUS = BonusConfig(input="state", state_keys=("x_displacement",))
-HYPERSTATE_BONUS = BonusConfig(input="hyperstate", state_keys=("x_displacement",))
+STATE_BONUS = BonusConfig(input="state")  # state_keys="task": the task's position keys
+HYPERSTATE_BONUS = BonusConfig(input="hyperstate")
 # The reference scales the belief oracle's RND prior by 5 instead of 10.
 ORACLE_HYPERSTATE_BONUS = dataclasses.replace(HYPERSTATE_BONUS, prior_scale=5.0)
 

@@ -16,6 +16,7 @@ import argparse
 import json
 import os
 import shutil
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -83,6 +84,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--no-reference",
         action="store_true",
         help=f"do not train the task-aware reference ({REFERENCE_AGENT}) used for regret",
+    )
+    p.add_argument(
+        "--video",
+        action="store_true",
+        help="render one deployment per agent and task (first seed) to OUT/videos/*.mp4 "
+        "(needs MUJOCO_GL=egl or osmesa support; see evaluation/video.py)",
     )
     p.add_argument("--resume", action="store_true", help="continue a grid in OUT (completed cells are kept)")
     p.add_argument("--force", action="store_true", help="delete OUT's previous results first")
@@ -160,6 +167,19 @@ def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
     return names, overrides
 
 
+def incompatible_cells(args: argparse.Namespace, names: list[str], overrides: dict[str, dict]) -> dict:
+    """{(agent, task): reason} for the pairs that cannot run, e.g. `oracle` on a task without an exact belief."""
+    task_kwargs = {} if args.episodes_per_task is None else {"episodes_per_task": args.episodes_per_task}
+    skipped = {}
+    for task in args.tasks:
+        for name in names:
+            try:
+                agents.make(name, **overrides[name]).check_task(task, task_kwargs)
+            except ValueError as e:
+                skipped[(name, task)] = str(e)
+    return skipped
+
+
 def prepare_out(args: argparse.Namespace, grid: dict) -> None:
     """Refuses to mix grids or overwrite results unless asked (--resume / --force)."""
     out: Path = args.out
@@ -220,6 +240,22 @@ def run_ray(specs: list[CellSpec], address: str | None, progress: bool) -> None:
     overall.close()
 
 
+def render_videos(args: argparse.Namespace) -> None:
+    """Runs evaluation/video.py in a fresh process: MUJOCO_GL is read when dm_control is imported, and
+    training ran without rendering."""
+    gl = os.environ.get("MUJOCO_GL")
+    env = {**os.environ, "MUJOCO_GL": gl if gl in ("egl", "osmesa", "glfw") else "egl"}
+    command = [sys.executable, "-m", "evaluation.video", str(args.out)]
+    if args.imports:
+        command += ["--import", *args.imports]
+    result = subprocess.run(command, env=env, cwd=Path(__file__).resolve().parents[1])
+    if result.returncode != 0:
+        print(
+            f"evaluation/run.py: rendering the videos failed (exit {result.returncode}); the results stand",
+            file=sys.stderr,
+        )
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     try:
@@ -239,10 +275,17 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as e:
         print(f"evaluation/run.py: error: {e}", file=sys.stderr)
         return 2
+    skipped = incompatible_cells(args, names, overrides)
+    for (name, task), reason in skipped.items():
+        print(f"evaluation/run.py: skipping {name} on {task}: {reason}", file=sys.stderr)
+    if len(skipped) == len(names) * len(args.tasks):
+        print("evaluation/run.py: error: no agent of the grid can run on its tasks", file=sys.stderr)
+        return 2
     workers = args.workers or max(1, (os.cpu_count() or 1) // 2)
     cells_per_worker_threads = max(1, (os.cpu_count() or 1) // workers)
     specs = []
-    for i, (name, task, seed) in enumerate((n, t, s) for t in args.tasks for n in names for s in args.seeds):
+    cells = [(n, t, s) for t in args.tasks for n in names for s in args.seeds if (n, t) not in skipped]
+    for i, (name, task, seed) in enumerate(cells):
         agent_overrides = dict(overrides[name])
         if args.executor == "local" and workers > 1:
             # Parallel cells share the cores: give each cell's physics its share.
@@ -277,6 +320,8 @@ def main(argv: list[str] | None = None) -> int:
     records = load_records(args.out)
     rows = write_summary(args.out, records)
     write_figures(args.out, records)
+    if args.video:
+        render_videos(args)
     print()
     print(text_table(rows))
     print(f"\n{len(records)} cells in {time.perf_counter() - started:.0f} s; results in {args.out}/")

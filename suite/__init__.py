@@ -8,7 +8,17 @@ Register your own meta-task from your own module with `@suite.register("name")`.
 
 from suite import cheetah_dir, cheetah_vel, point_robot, quadruped_goal  # noqa: F401  (register the built-in tasks)
 from suite._batch import BatchEnv, BatchStep, LoopBatch
-from suite._registry import TASKS, batch, exploration_metrics, list_tasks, load, register, task_prior, unregister
+from suite._registry import (
+    TASKS,
+    batch,
+    exploration_metrics,
+    list_tasks,
+    load,
+    position_keys,
+    register,
+    task_prior,
+    unregister,
+)
 from suite._seeding import as_generator, spawn_seeds
 from suite.base import MetaTask, TaskPrior
 
@@ -24,6 +34,7 @@ __all__ = [
     "exploration_metrics",
     "list_tasks",
     "load",
+    "position_keys",
     "register",
     "spawn_seeds",
     "task_prior",

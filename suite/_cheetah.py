@@ -22,7 +22,7 @@ from dm_env import specs
 
 from suite._batch import BatchStep, check_batch_action
 from suite._seeding import SeedLike, spawn_seeds
-from suite.base import MetaTask, TaskPrior, check_action
+from suite.base import Marker, MetaTask, TaskPrior, check_action
 
 # dm_control's cheetah.xml uses a compiler attribute MuJoCo 3.17 deprecates; the warning fires on every
 # load and says nothing actionable to users of this suite.
@@ -74,8 +74,19 @@ class CheetahZoneTask(MetaTask):
         self._action = np.zeros(0)
         self._action_spec = None
 
+    video_camera = "side"
+
     def zone_reward(self, vx: float, outside: bool) -> float:
         raise NotImplementedError
+
+    def markers(self, physics: Physics) -> list[Marker]:
+        """The zone's two borders as thin red walls across the track."""
+        if self.zone_radius == 0:
+            return []
+        return [
+            Marker("box", (self._x0 + side * self.zone_radius, 0.0, 0.4), (0.02, 0.6, 0.4), (0.9, 0.2, 0.2, 0.5))
+            for side in (-1.0, 1.0)
+        ]
 
     def initialize_mdp_episode(self, physics: Physics) -> None:
         is_limited = physics.model.jnt_limited == 1

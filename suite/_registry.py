@@ -28,6 +28,7 @@ class TaskEntry:
     factory: Factory
     batch_factory: Callable[..., BatchEnv] | None = None
     metrics: Callable[..., dict] | None = None
+    position_keys: tuple[str, ...] | None = None
 
 
 _REGISTRY: dict[str, TaskEntry] = {}
@@ -37,7 +38,11 @@ TASKS: list[str] = []
 
 
 def register(
-    name: str, *, batch: Callable[..., BatchEnv] | None = None, metrics: Callable[..., dict] | None = None
+    name: str,
+    *,
+    batch: Callable[..., BatchEnv] | None = None,
+    metrics: Callable[..., dict] | None = None,
+    position_keys: tuple[str, ...] | None = None,
 ) -> Callable[[Factory], Factory]:
     """Decorator registering `factory(seed=None, **kwargs)` under `name`.
 
@@ -46,6 +51,8 @@ def register(
     `suite.batch`). `metrics`, if given, computes deployed-exploration metrics
     `metrics(observations, rewards, tasks, **task_kwargs) -> {name: (M,) array}` from M deployments
     ((T, M, ...) observations each step ended in, (T, M) rewards, (M, P) true tasks).
+    `position_keys`, if given, names the observations that say where the agent is (what state-based
+    exploration bonuses look at by default, e.g. `("x_displacement",)`).
     """
     if not isinstance(name, str) or not name:
         raise ValueError(f"task name must be a non-empty string, got {name!r}")
@@ -55,7 +62,9 @@ def register(
             raise ValueError(f"task {name!r} is already registered (by {_REGISTRY[name].factory.__module__})")
         if "seed" not in inspect.signature(factory).parameters:
             raise TypeError(f"factory for {name!r} must accept a `seed` keyword argument")
-        _REGISTRY[name] = TaskEntry(name, factory, batch, metrics)
+        _REGISTRY[name] = TaskEntry(
+            name, factory, batch, metrics, None if position_keys is None else tuple(position_keys)
+        )
         TASKS[:] = sorted(_REGISTRY)
         return factory
 
@@ -72,6 +81,11 @@ def unregister(name: str) -> None:
 def exploration_metrics(name: str) -> Callable[..., dict] | None:
     """The deployed-exploration metrics function task `name` declares, or None."""
     return _lookup(name).metrics
+
+
+def position_keys(name: str) -> tuple[str, ...] | None:
+    """The observation keys task `name` declares as its position (for state bonuses), or None."""
+    return _lookup(name).position_keys
 
 
 def task_prior(name: str, **kwargs: Any):

@@ -9,6 +9,7 @@ same task: physics is reset between them, task and belief are not, and the obser
 from __future__ import annotations
 
 import collections
+import dataclasses
 from typing import Protocol
 
 import numpy as np
@@ -16,6 +17,17 @@ from dm_control.suite import base
 from dm_env import specs
 
 from suite._seeding import SeedLike, as_generator
+
+
+@dataclasses.dataclass(frozen=True)
+class Marker:
+    """A decoration drawn into rendered frames only (never simulated): a MuJoCo geom type name
+    ("box", "cylinder", "sphere"), its world position, size and colour."""
+
+    type: str
+    pos: tuple[float, float, float]
+    size: tuple[float, float, float]
+    rgba: tuple[float, float, float, float]
 
 
 class TaskPrior(Protocol):
@@ -92,6 +104,17 @@ class MetaTask(base.Task):
 
     def sample_task(self) -> np.ndarray:
         return self._forced_task.copy() if self._forced_task is not None else self._prior.sample(self._rng)
+
+    # Rendering: which camera videos use, a one-line description of the task, scene decorations.
+    video_camera: str | int = 0
+
+    def caption(self) -> str:
+        """The current task in words, for video overlays."""
+        return "task " + ", ".join(f"{v:.2f}" for v in self._task)
+
+    def markers(self, physics) -> list[Marker]:
+        """Decorations of the current task for rendered frames (e.g. the zone's borders)."""
+        return []
 
     # Subclass hooks -----------------------------------------------------------------------------
     def prior_belief(self) -> np.ndarray | None:

@@ -77,6 +77,9 @@ class CheetahDirection(CheetahZoneTask):
     def prior_belief(self) -> np.ndarray:
         return self._prior.probabilities()
 
+    def caption(self) -> str:
+        return "task: run forward ->" if self.direction > 0 else "task: run backward <-"
+
     def zone_reward(self, vx: float, outside: bool) -> float:
         if outside:
             self._belief = one_hot_direction(self._task)
@@ -170,7 +173,7 @@ def _register(name: str, zone_radius: float) -> None:
     factory.__name__ = factory.__qualname__ = name
     factory.__doc__ = f"`{name}`: cheetah-direction meta-task, zone radius {zone_radius} m (see suite.cheetah_dir)."
     metrics = functools.partial(zone_exploration_metrics, zone_radius=zone_radius)
-    register(name, batch=batch_factory, metrics=metrics)(factory)
+    register(name, batch=batch_factory, metrics=metrics, position_keys=("x_displacement",))(factory)
 
 
 _register("cheetah_dir_sparse", ZONE_RADIUS)

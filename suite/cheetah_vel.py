@@ -67,6 +67,9 @@ class CheetahVelocity(CheetahZoneTask):
     def prior_belief(self) -> None:
         return None
 
+    def caption(self) -> str:
+        return f"task: run at {self.target_velocity:.2f} m/s"
+
     def zone_reward(self, vx: float, outside: bool) -> float:
         return float(velocity_reward(vx, self.target_velocity, outside))
 
@@ -140,7 +143,7 @@ def _register(name: str, zone_radius: float) -> None:
     def metrics(observations, rewards, tasks, zone_radius: float = zone_radius, **_):
         return velocity_metrics(observations, rewards, tasks, zone_radius=zone_radius)
 
-    register(name, batch=batch_factory, metrics=metrics)(factory)
+    register(name, batch=batch_factory, metrics=metrics, position_keys=("x_displacement",))(factory)
 
 
 _register("cheetah_vel_sparse", ZONE_RADIUS)

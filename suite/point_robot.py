@@ -30,7 +30,7 @@ from dm_env import specs
 from suite._batch import BatchStep, check_batch_action
 from suite._registry import register
 from suite._seeding import SeedLike, spawn_seeds
-from suite.base import MetaTask, check_action
+from suite.base import Marker, MetaTask, check_action
 
 PHYSICS_TIMESTEP = 0.01
 N_SUB_STEPS = 5
@@ -155,8 +155,20 @@ class PointRobotGoal(MetaTask):
                 )
         super().force_task(task)
 
+    video_camera = "top"
+
     def prior_belief(self) -> np.ndarray | None:
         return self._prior.probabilities()
+
+    def caption(self) -> str:
+        return f"task: goal at ({self._task[0]:.2f}, {self._task[1]:.2f})"
+
+    def markers(self, physics: Physics) -> list[Marker]:
+        """The candidate goals of a finite prior, as grey discs (the true goal is the model's green site)."""
+        support = self._prior.support()
+        if support is None:
+            return []
+        return [Marker("cylinder", (*g, 0.001), (self.goal_radius, 0.001, 0.0), (0.5, 0.5, 0.5, 0.4)) for g in support]
 
     def initialize_episode(self, physics: Physics) -> None:
         super().initialize_episode(physics)
@@ -395,7 +407,7 @@ def _register(name: str, *, sparse: bool, num_goals: int | None, episode_length:
     def metrics(observations, rewards, tasks, goal_radius: float = GOAL_RADIUS, **_):
         return goal_metrics(observations, rewards, tasks, goal_radius=goal_radius)
 
-    register(name, batch=batch_factory, metrics=metrics)(factory)
+    register(name, batch=batch_factory, metrics=metrics, position_keys=("position",))(factory)
 
 
 _register("point_robot_sparse", sparse=True, num_goals=None, episode_length=EPISODE_LENGTH, episodes_per_task=1)

@@ -21,7 +21,7 @@ from dm_control.suite import quadruped
 
 from suite._registry import register
 from suite._seeding import SeedLike
-from suite.base import MetaTask, check_action
+from suite.base import Marker, MetaTask, check_action
 
 CONTROL_TIMESTEP = 0.02  # dm_control's quadruped
 EPISODE_LENGTH = 500  # control steps per MDP episode (10 s)
@@ -59,8 +59,17 @@ class QuadrupedGoal(MetaTask):
             raise ValueError(f"goal must be a finite (x, y) pair or None, got {task!r}")
         super().force_task(task)
 
+    video_camera = "global"
+
     def prior_belief(self) -> None:
         return None
+
+    def caption(self) -> str:
+        return f"task: goal at ({self._task[0]:.2f}, {self._task[1]:.2f})"
+
+    def markers(self, physics) -> list[Marker]:
+        """The rewarded disc around the goal."""
+        return [Marker("cylinder", (*self._task, 0.01), (self.goal_radius, 0.01, 0.0), (0.2, 0.7, 0.2, 0.6))]
 
     def initialize_mdp_episode(self, physics: quadruped.Physics) -> None:
         yaw = self._rng.uniform(0.0, 2.0 * np.pi)
@@ -99,7 +108,7 @@ def goal_metrics(observations, rewards, tasks, **_) -> dict[str, np.ndarray]:
     }
 
 
-@register("quadruped_goal_sparse", metrics=goal_metrics)
+@register("quadruped_goal_sparse", metrics=goal_metrics, position_keys=("position",))
 def quadruped_goal_sparse(
     seed: SeedLike = None,
     *,

@@ -1,0 +1,170 @@
+"""Videos of deployments: one MP4 per trained (agent, task) cell, with the task and belief overlaid.
+
+    MUJOCO_GL=egl python -m evaluation.video OUT [--cells AGENT__TASK__sSEED ...] [--width 320 --height 240]
+
+renders, for each cell of a finished `evaluation/run.py` results folder OUT (default: the first seed
+of every (agent, task)), one deterministic deployment on the first held-out task to
+OUT/videos/<cell>.mp4 at the task's real-time frame rate. The task draws its decorations into the scene
+(e.g. the zone's borders, the goal); a caption shows the task, step, return so far and the exact
+belief where the task has one. Needs an off-screen OpenGL backend: MUJOCO_GL=egl (libegl1) or osmesa
+(Debian's libosmesa6); `evaluation/run.py --video` runs this module with MUJOCO_GL=egl.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from PIL import Image, ImageDraw
+
+import agents
+import suite
+from evaluation.cell import import_modules
+from evaluation.deploy import EVAL_SEED, evaluation_tasks
+
+GEOM_TYPES = {
+    "box": mujoco.mjtGeom.mjGEOM_BOX,
+    "cylinder": mujoco.mjtGeom.mjGEOM_CYLINDER,
+    "sphere": mujoco.mjtGeom.mjGEOM_SPHERE,
+}
+
+
+def _add_markers(markers):
+    def callback(physics, scene: mujoco.MjvScene) -> None:
+        for m in markers:
+            if scene.ngeom >= scene.maxgeom:
+                return
+            scene.ngeom += 1  # first: the bindings expose only the scene's first `ngeom` geoms
+            mujoco.mjv_initGeom(
+                scene.geoms[scene.ngeom - 1],
+                GEOM_TYPES[m.type],
+                np.asarray(m.size, np.float64),
+                np.asarray(m.pos, np.float64),
+                np.eye(3).ravel(),
+                np.asarray(m.rgba, np.float32),
+            )
+
+    return callback
+
+
+def _caption(frame: np.ndarray, lines: list[str]) -> np.ndarray:
+    image = Image.fromarray(frame)
+    draw = ImageDraw.Draw(image)
+    height = 12 * len(lines) + 6
+    draw.rectangle((0, 0, image.width, height), fill=(0, 0, 0))
+    for i, line in enumerate(lines):
+        draw.text((4, 3 + 12 * i), line, fill=(255, 255, 255))
+    return np.asarray(image)
+
+
+def render_deployment(
+    agent: agents.Agent,
+    task: str,
+    path: str | os.PathLike,
+    *,
+    task_parameters: np.ndarray | None = None,
+    episodes_per_task: int | None = None,
+    width: int = 320,
+    height: int = 240,
+) -> dict:
+    """Deploys `agent` once on `task` (deterministic actions, from the prior belief), writes the frames
+    to the MP4 `path`; returns {"return": ..., "frames": ..., "fps": ...}."""
+    import imageio_ffmpeg
+
+    kwargs = {} if episodes_per_task is None else {"episodes_per_task": episodes_per_task}
+    env = suite.load(task, seed=EVAL_SEED, privileged=True, **kwargs)
+    if task_parameters is None:
+        task_parameters = evaluation_tasks(task, 1)[0]
+    env.task.force_task(task_parameters)
+    fps = 1.0 / env.control_timestep()
+    step = env.reset()
+    state, total, t, frames = None, 0.0, 0, 0
+
+    def frame(reward_so_far: float) -> np.ndarray:
+        pixels = env.physics.render(
+            height, width, camera_id=env.task.video_camera, scene_callback=_add_markers(env.task.markers(env.physics))
+        )
+        lines = [f"{agent.name} on {task}", env.task.caption()]
+        status = (
+            f"episode {env.task.inner_episode + 1}/{env.task.episodes_per_task}  step {t}  return {reward_so_far:.1f}"
+        )
+        if "x_displacement" in step.observation:
+            x = float(step.observation["x_displacement"][0])
+            zone = getattr(env.task, "zone_radius", 0.0)
+            status += f"  x {x:+.1f} m" + (f" ({'outside' if abs(x) >= zone else 'inside'} zone)" if zone else "")
+        lines.append(status)
+        if env.task.belief is not None:
+            lines.append("exact belief " + " ".join(f"{p:.2f}" for p in env.task.belief))
+        return _caption(pixels, lines)
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    writer = imageio_ffmpeg.write_frames(
+        str(path), (width, height), fps=fps, macro_block_size=1, output_params=["-loglevel", "error"]
+    )
+    writer.send(None)
+    try:
+        writer.send(np.ascontiguousarray(frame(0.0)))
+        frames += 1
+        while not step.last():
+            obs = {k: np.asarray(v)[None] for k, v in step.observation.items()}
+            reward = None if state is None else np.array([step.reward])
+            action, state = agent.act(obs, state, deterministic=True, reward=reward)
+            step = env.step(action[0])
+            total += step.reward
+            t += 1
+            writer.send(np.ascontiguousarray(frame(total)))
+            frames += 1
+    finally:
+        writer.close()
+    return {"return": total, "frames": frames, "fps": fps}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("out", type=Path, help="a results folder of evaluation/run.py")
+    parser.add_argument("--cells", nargs="+", help="cell folder names (default: the first seed of each agent and task)")
+    parser.add_argument(
+        "--import",
+        dest="imports",
+        nargs="+",
+        default=[],
+        metavar="MODULE",
+        help="modules or .py files registering the tasks (as for evaluation/run.py)",
+    )
+    parser.add_argument("--width", type=int, default=320)
+    parser.add_argument("--height", type=int, default=240)
+    args = parser.parse_args(argv)
+    grid_file = args.out / "grid.json"
+    if not grid_file.exists():
+        print(
+            f"evaluation/video.py: error: {args.out} holds no evaluation/run.py results (no grid.json)", file=sys.stderr
+        )
+        return 2
+    grid = json.loads(grid_file.read_text())
+    import_modules(args.imports)
+    cells = args.cells or [f"{a}__{t}__s{grid['seeds'][0]}" for t in grid["tasks"] for a in grid["agents"]]
+    for cell in cells:
+        saved = args.out / "cells" / cell / "agent.pt"
+        if not saved.exists():
+            print(f"evaluation/video.py: no trained agent for {cell} (skipped)", file=sys.stderr)
+            continue
+        agent = agents.Agent.load(saved)
+        task = cell.split("__")[1]
+        path = args.out / "videos" / f"{cell}.mp4"
+        info = render_deployment(
+            agent, task, path, episodes_per_task=grid.get("episodes_per_task"), width=args.width, height=args.height
+        )
+        print(f"{path}: {info['frames']} frames at {info['fps']:.0f} fps, return {info['return']:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
