@@ -14,13 +14,11 @@ import collections
 import logging
 
 import mujoco
-import mujoco.batch
 import numpy as np
 from dm_control.rl import control
 from dm_control.suite import cheetah
-from dm_env import specs
 
-from suite._batch import BatchStep, check_batch_action
+from suite._mujoco_batch import MujocoBatch
 from suite._seeding import SeedLike, spawn_seeds
 from suite.base import Marker, MetaTask, TaskPrior, check_action
 
@@ -130,70 +128,25 @@ def environment(task: CheetahZoneTask) -> control.Environment:
     return control.Environment(physics, task, n_sub_steps=N_SUB_STEPS)
 
 
-class CheetahZoneBatch:
+class CheetahZoneBatch(MujocoBatch):
     """`num_envs` copies of a `CheetahZoneTask` on one `mujoco.batch.Batch`, reset together.
 
-    `make_task(seed)` builds one copy's task object (it holds the copy's prior, forced task and
-    generator; the physics lives in the batch). Subclasses implement `zone_reward(vx, outside)`, the
-    vectorised reward before the control cost, which may update `self._belief`. Every copy has the
-    same horizon, so all copies reach MDP and BAMDP episode ends on the same step.
+    `make_task(seed)` builds one copy's task object. Subclasses implement `zone_reward(vx, outside)`,
+    the vectorised reward before the control cost, which may update `self._belief`.
     """
 
     def __init__(self, num_envs: int, seed: SeedLike, make_task, *, num_threads: int = 0):
-        self._tasks: list[CheetahZoneTask] = [make_task(s) for s in spawn_seeds(seed, num_envs)]
-        first = self._tasks[0]
-        self.num_envs = num_envs
-        self.zone_radius = first.zone_radius
-        self.ctrl_cost_weight = first.ctrl_cost_weight
-        self.episode_length = first.episode_length
-        self.episodes_per_task = first.episodes_per_task
-        self.privileged = first.privileged
+        tasks = [make_task(s) for s in spawn_seeds(seed, num_envs)]
         self._physics = Physics.from_xml_string(*cheetah.get_model_and_assets())
-        model = self._physics.model.ptr
-        self._sim = mujoco.batch.Batch(model, nsim=num_envs, nthread=num_threads)
-        self._qpos = self._sim.bind("qpos")
-        self._qvel = self._sim.bind("qvel")
-        self._ctrl = self._sim.bind("ctrl")
-        self._time = self._sim.bind("time")
-        self._limited = np.flatnonzero(model.jnt_limited == 1)  # all joints have one dof
-        self._lower, self._upper = model.jnt_range[self._limited].T
-        self._action_spec = specs.BoundedArray(
-            (model.nu,), np.float64, model.actuator_ctrlrange[:, 0], model.actuator_ctrlrange[:, 1], name="action"
-        )
-        prior_belief = first.prior_belief()
-        self._has_belief = prior_belief is not None
-        self._task = np.zeros((num_envs, len(first.prior.sample(np.random.default_rng(0)))))
-        self._belief = np.zeros((num_envs, 0 if prior_belief is None else len(prior_belief)))
+        super().__init__(tasks, self._physics.model.ptr, num_threads)
+        self.zone_radius = tasks[0].zone_radius
+        self.ctrl_cost_weight = tasks[0].ctrl_cost_weight
+        self._limited = np.flatnonzero(self._model.jnt_limited == 1)  # all joints have one dof
+        self._lower, self._upper = self._model.jnt_range[self._limited].T
         self._x0 = np.zeros(num_envs)
-        self._inner_episode = 0
-        self._inner_step = 0
-        self._started = False
 
     def zone_reward(self, vx: np.ndarray, outside: np.ndarray) -> np.ndarray:
         raise NotImplementedError
-
-    def observation_spec(self) -> dict[str, specs.Array]:
-        return {k: specs.Array(v.shape[1:], v.dtype, name=k) for k, v in self._observation().items()}
-
-    def action_spec(self) -> specs.BoundedArray:
-        return self._action_spec
-
-    @property
-    def belief(self) -> np.ndarray:
-        """Privileged: exact beliefs of all copies, (num_envs, B)."""
-        return self._belief.copy()
-
-    @property
-    def task_parameters(self) -> np.ndarray:
-        """Privileged: the true task parameters, (num_envs, P)."""
-        return self._task.copy()
-
-    def set_tasks(self, tasks: np.ndarray | None) -> None:
-        """Forces copy i's task to `tasks[i]` from the next reset on (None: sample from the prior again)."""
-        if tasks is not None and len(tasks) != self.num_envs:
-            raise ValueError(f"need one task per copy ({self.num_envs}), got {len(tasks)}")
-        for i, task in enumerate(self._tasks):
-            task.force_task(None if tasks is None else tasks[i])
 
     def _reset_mdp(self) -> None:
         self._sim.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
@@ -203,39 +156,7 @@ class CheetahZoneBatch:
         self._time[:] = 0.0
         self._x0 = self._qpos[:, 0].copy()
 
-    def _reset_bamdp(self) -> None:
-        self._task = np.stack([task.sample_task() for task in self._tasks])
-        if self._has_belief:
-            self._belief = np.tile(self._tasks[0].prior_belief(), (self.num_envs, 1))
-        self._inner_episode = 0
-        self._inner_step = 0
-        self._reset_mdp()
-
-    def _observation(self) -> dict[str, np.ndarray]:
-        obs = {
-            "position": self._qpos[:, 1:].copy(),
-            "velocity": self._qvel.copy(),
-            "x_displacement": (self._qpos[:, 0] - self._x0)[:, None],
-            "inner_episode": np.full((self.num_envs, 1), float(self._inner_episode)),
-        }
-        if self.privileged:
-            if self._has_belief:
-                obs["belief"] = self._belief.copy()
-            obs["task"] = self._task.copy()
-        return obs
-
-    def reset(self) -> BatchStep:
-        self._reset_bamdp()
-        self._started = True
-        obs = self._observation()
-        n = self.num_envs
-        return BatchStep(obs, np.zeros(n), np.ones(n), np.zeros(n, bool), obs)
-
-    def step(self, action: np.ndarray) -> BatchStep:
-        if not self._started:
-            raise RuntimeError("call reset() before step()")
-        spec = self._action_spec
-        action = np.clip(check_batch_action(action, self.num_envs, spec), spec.minimum, spec.maximum)
+    def _transition(self, action: np.ndarray) -> np.ndarray:
         x_before = self._qpos[:, 0].copy()
         self._ctrl[:] = action
         self._sim.step(nstep=N_SUB_STEPS)
@@ -243,43 +164,17 @@ class CheetahZoneBatch:
         vx = (x - x_before) / CONTROL_TIMESTEP
         ctrl_cost = self.ctrl_cost_weight * np.sum(np.square(action), axis=1)
         outside = np.abs(x - self._x0) >= self.zone_radius
-        reward = self.zone_reward(vx, outside) - ctrl_cost
+        return self.zone_reward(vx, outside) - ctrl_cost
 
-        self._inner_step += 1
-        n = self.num_envs
-        last = np.zeros(n, bool)
-        if self._inner_step == self.episode_length:
-            if self._inner_episode + 1 < self.episodes_per_task:
-                self._inner_episode += 1
-                self._inner_step = 0
-                self._reset_mdp()
-            else:
-                last[:] = True
-        obs = final = self._observation()
-        if last[0]:
-            self._reset_bamdp()
-            obs = self._observation()
-        return BatchStep(obs, reward, np.ones(n), last, final)
-
-    def state_dict(self) -> dict:
-        """Everything needed to continue exactly from here (physics rows, generators, task, belief)."""
+    def _mdp_observation(self) -> dict[str, np.ndarray]:
         return {
-            "physics": np.array(self._sim.state, copy=True),
-            "generators": [task.random.bit_generator.state for task in self._tasks],
-            "task": self._task.copy(),
-            "belief": self._belief.copy(),
-            "x0": self._x0.copy(),
-            "counters": (self._inner_episode, self._inner_step, self._started),
+            "position": self._qpos[:, 1:].copy(),
+            "velocity": self._qvel.copy(),
+            "x_displacement": (self._qpos[:, 0] - self._x0)[:, None],
         }
 
-    def load_state_dict(self, state: dict) -> None:
-        self._sim.state[...] = state["physics"]
-        for task, gen_state in zip(self._tasks, state["generators"], strict=True):
-            task.random.bit_generator.state = gen_state
-        self._task = state["task"].copy()
-        self._belief = state["belief"].copy()
-        self._x0 = state["x0"].copy()
-        self._inner_episode, self._inner_step, self._started = state["counters"]
+    def _extra_state(self) -> dict:
+        return {"x0": self._x0.copy()}
 
-    def close(self) -> None:
-        pass
+    def _load_extra_state(self, state: dict) -> None:
+        self._x0 = state["x0"].copy()

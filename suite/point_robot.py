@@ -20,14 +20,12 @@ from __future__ import annotations
 import collections
 
 import mujoco
-import mujoco.batch
 import numpy as np
 from dm_control.mujoco import Physics as MjPhysics
 from dm_control.rl import control
 from dm_control.suite import base as suite_base
-from dm_env import specs
 
-from suite._batch import BatchStep, check_batch_action
+from suite._mujoco_batch import MujocoBatch
 from suite._registry import register
 from suite._seeding import SeedLike, spawn_seeds
 from suite.base import Marker, MetaTask, check_action
@@ -204,135 +202,29 @@ class PointRobotGoal(MetaTask):
         return obs
 
 
-class PointRobotBatch:
+class PointRobotBatch(MujocoBatch):
     """`num_envs` copies of `PointRobotGoal` on one `mujoco.batch.Batch`, reset together."""
 
     def __init__(self, num_envs: int, seed: SeedLike = None, *, num_threads: int = 0, **task_kwargs):
-        self._tasks = [PointRobotGoal(random=s, **task_kwargs) for s in spawn_seeds(seed, num_envs)]
-        first = self._tasks[0]
-        self.num_envs = num_envs
-        self.sparse, self.goal_radius = first.sparse, first.goal_radius
-        self.episode_length, self.episodes_per_task = first.episode_length, first.episodes_per_task
-        self.privileged = first.privileged
-        self._support = first.prior.support()
-        self._model = mujoco.MjModel.from_xml_string(MODEL_XML)
-        self._sim = mujoco.batch.Batch(self._model, nsim=num_envs, nthread=num_threads)
-        self._qpos = self._sim.bind("qpos")
-        self._qvel = self._sim.bind("qvel")
-        self._ctrl = self._sim.bind("ctrl")
-        self._action_spec = specs.BoundedArray(
-            (self._model.nu,),
-            np.float64,
-            self._model.actuator_ctrlrange[:, 0],
-            self._model.actuator_ctrlrange[:, 1],
-            name="action",
-        )
-        self._goal = np.zeros((num_envs, 2))
-        self._belief = None if self._support is None else np.zeros((num_envs, len(self._support)))
-        self._inner_episode = 0
-        self._inner_step = 0
-        self._started = False
-
-    def observation_spec(self) -> dict[str, specs.Array]:
-        return {k: specs.Array(v.shape[1:], v.dtype, name=k) for k, v in self._observation().items()}
-
-    def action_spec(self) -> specs.BoundedArray:
-        return self._action_spec
-
-    @property
-    def belief(self) -> np.ndarray | None:
-        """Privileged: exact beliefs of all copies, (num_envs, num_goals); None for the continuous prior."""
-        return None if self._belief is None else self._belief.copy()
-
-    @property
-    def task_parameters(self) -> np.ndarray:
-        """Privileged: the true goals, (num_envs, 2)."""
-        return self._goal.copy()
-
-    def set_tasks(self, tasks: np.ndarray | None) -> None:
-        """Forces copy i's goal to `tasks[i]` from the next reset on (None: sample from the prior again)."""
-        if tasks is not None and len(tasks) != self.num_envs:
-            raise ValueError(f"need one task per copy ({self.num_envs}), got {len(tasks)}")
-        for i, task in enumerate(self._tasks):
-            task.force_task(None if tasks is None else tasks[i])
+        tasks = [PointRobotGoal(random=s, **task_kwargs) for s in spawn_seeds(seed, num_envs)]
+        super().__init__(tasks, mujoco.MjModel.from_xml_string(MODEL_XML), num_threads)
+        self.sparse, self.goal_radius = tasks[0].sparse, tasks[0].goal_radius
+        self._support = tasks[0].prior.support()
 
     def _reset_mdp(self) -> None:
         self._sim.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)  # qpos0 = 0 (the origin), at rest
 
-    def _reset_bamdp(self) -> None:
-        self._goal = np.stack([task.sample_task() for task in self._tasks])
-        if self._belief is not None:
-            self._belief = np.tile(self._tasks[0].prior_belief(), (self.num_envs, 1))
-        self._inner_episode = 0
-        self._inner_step = 0
-        self._reset_mdp()
-
-    def _observation(self) -> dict[str, np.ndarray]:
-        obs = {
-            "position": self._qpos[:, :2].copy(),
-            "velocity": self._qvel[:, :2].copy(),
-            "inner_episode": np.full((self.num_envs, 1), float(self._inner_episode)),
-        }
-        if self.privileged:
-            if self._belief is not None:
-                obs["belief"] = self._belief.copy()
-            obs["task"] = self._goal.copy()
-        return obs
-
-    def reset(self) -> BatchStep:
-        self._reset_bamdp()
-        self._started = True
-        obs = self._observation()
-        n = self.num_envs
-        return BatchStep(obs, np.zeros(n), np.ones(n), np.zeros(n, bool), obs)
-
-    def step(self, action: np.ndarray) -> BatchStep:
-        if not self._started:
-            raise RuntimeError("call reset() before step()")
-        spec = self._action_spec
-        self._ctrl[:] = np.clip(check_batch_action(action, self.num_envs, spec), spec.minimum, spec.maximum)
+    def _transition(self, action: np.ndarray) -> np.ndarray:
+        self._ctrl[:] = action
         self._sim.step(nstep=N_SUB_STEPS)
         position = self._qpos[:, :2].copy()
-        reward = goal_reward(position, self._goal, self.sparse, self.goal_radius)
+        reward = goal_reward(position, self._task, self.sparse, self.goal_radius)
         if self._belief is not None:
             self._belief = belief_update(self._belief, self._support, position, reward, self.sparse, self.goal_radius)
+        return reward
 
-        self._inner_step += 1
-        n = self.num_envs
-        last = np.zeros(n, bool)
-        if self._inner_step == self.episode_length:
-            if self._inner_episode + 1 < self.episodes_per_task:
-                self._inner_episode += 1
-                self._inner_step = 0
-                self._reset_mdp()
-            else:
-                last[:] = True
-        obs = final = self._observation()
-        if last[0]:
-            self._reset_bamdp()
-            obs = self._observation()
-        return BatchStep(obs, reward, np.ones(n), last, final)
-
-    def state_dict(self) -> dict:
-        """Everything needed to continue exactly from here (physics rows, generators, goals, beliefs)."""
-        return {
-            "physics": np.array(self._sim.state, copy=True),
-            "generators": [task.random.bit_generator.state for task in self._tasks],
-            "goal": self._goal.copy(),
-            "belief": None if self._belief is None else self._belief.copy(),
-            "counters": (self._inner_episode, self._inner_step, self._started),
-        }
-
-    def load_state_dict(self, state: dict) -> None:
-        self._sim.state[...] = state["physics"]
-        for task, gen_state in zip(self._tasks, state["generators"], strict=True):
-            task.random.bit_generator.state = gen_state
-        self._goal = state["goal"].copy()
-        self._belief = None if state["belief"] is None else state["belief"].copy()
-        self._inner_episode, self._inner_step, self._started = state["counters"]
-
-    def close(self) -> None:
-        pass
+    def _mdp_observation(self) -> dict[str, np.ndarray]:
+        return {"position": self._qpos[:, :2].copy(), "velocity": self._qvel[:, :2].copy()}
 
 
 def goal_metrics(
