@@ -333,3 +333,22 @@ def test_quadruped_goal_prior_on_circle_and_random_headings():
         headings.append(obs["heading"])
     np.testing.assert_allclose(np.linalg.norm(headings, axis=1), 1.0, atol=1e-6)
     assert np.ptp(np.arctan2(*np.array(headings).T[::-1])) > 1.0
+
+
+# Learning on an easy setting -----------------------------------------------------------------------
+def test_task_aware_ppo_learns_to_reach_the_dense_point_robot_goal():
+    """100k frames (~30 s): from standing at the origin (return ≈ −100: distance 1 for 100 steps) to
+    moving onto the goal. Measured: −17 to −37 per held-out goal (seed 0)."""
+    import agents
+    from evaluation.deploy import deploy, evaluation_tasks
+
+    goals = evaluation_tasks("point_robot", 8)
+    settings = {"ppo.num_envs": 16, "ppo.rollout_length": 100}
+    untrained = agents.make("task_aware", **settings)
+    untrained.train("point_robot", frames=1, seed=0, progress=False)  # one iteration
+    trained = agents.make("task_aware", **settings)
+    trained.train("point_robot", frames=100_000, seed=0, progress=False)
+    before = deploy(untrained, "point_robot", goals).rewards.sum(0)
+    after = deploy(trained, "point_robot", goals).rewards.sum(0)
+    assert before.mean() < -80
+    assert after.mean() > -50 and np.all(after > before)
