@@ -9,10 +9,20 @@ import suite
 import suite.gym
 
 
-def test_passes_gymnasium_env_checker():
-    env = suite.gym.make("cheetah_dir_sparse", episode_length=20)
+@pytest.mark.parametrize(
+    "name,size",
+    [
+        ("cheetah_dir_sparse", 8 + 9 + 1 + 1),
+        ("cheetah_vel_sparse", 8 + 9 + 1 + 1),
+        ("point_robot_sparse", 2 + 2 + 1),
+        ("point_treasure_sparse", 2 + 2 + 1),
+        ("quadruped_goal_sparse", 44 + 3 + 1 + 6 + 24 + 2 + 2 + 1),  # dm_control's + position, heading
+    ],
+)
+def test_passes_gymnasium_env_checker(name, size):
+    env = suite.gym.make(name, episode_length=20)
     check_env(env, skip_render_check=True)
-    assert env.observation_space.shape == (8 + 9 + 1 + 1,)
+    assert env.observation_space.shape == (size,)
 
 
 def test_registry_ids_seeding_truncation_and_privileged_info():
