@@ -112,12 +112,16 @@ def text_table(rows: list[dict]) -> str:
     def fmt(v, spec=".1f"):
         return "-" if v is None else format(v, spec)
 
-    header = f"{'agent':<20} {'task':<20} {'seeds':>5} {'mean':>9} {'IQM':>9} {'95% CI':>19} {'regret':>9} {'left':>5}"
+    wa = max([20, *(len(r["agent"]) for r in rows)])
+    wt = max([20, *(len(r["task"]) for r in rows)])
+    header = (
+        f"{'agent':<{wa}} {'task':<{wt}} {'seeds':>5} {'mean':>9} {'IQM':>9} {'95% CI':>19} {'regret':>9} {'left':>5}"
+    )
     lines = [header, "-" * len(header)]
     for r in rows:
         ci = f"[{fmt(r['ci95_low'])}, {fmt(r['ci95_high'])}]"
         lines.append(
-            f"{r['agent']:<20} {r['task']:<20} {r['seeds']:>5} {fmt(r['online_return_mean']):>9} "
+            f"{r['agent']:<{wa}} {r['task']:<{wt}} {r['seeds']:>5} {fmt(r['online_return_mean']):>9} "
             f"{fmt(r['online_return_iqm']):>9} {ci:>19} {fmt(r['regret']):>9} {fmt(r['left_zone'], '.2f'):>5}"
         )
     return "\n".join(lines)
