@@ -166,8 +166,9 @@ class MetaTask(base.Task):
         obs = self.mdp_observation(physics)
         obs["inner_episode"] = np.zeros(1)
         if self.privileged:
-            if self.prior_belief() is not None:
-                obs["belief"] = self.prior_belief()
+            belief = self.prior_belief()
+            if belief is not None:
+                obs["belief"] = belief
             obs["task"] = np.asarray(self._prior.sample(np.random.default_rng(0)), dtype=np.float64)
         return collections.OrderedDict((k, specs.Array(v.shape, v.dtype, name=k)) for k, v in obs.items())
 

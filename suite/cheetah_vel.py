@@ -102,7 +102,7 @@ def velocity_metrics(
     after = steps >= first[None]
     max_ctrl_cost = CTRL_COST_WEIGHT * observations["velocity"].shape[-1]  # |a| <= 1 per actuator
     on_target = (rewards > -max_ctrl_cost + 1e-12) & outside  # only the velocity term can lift it
-    fraction = np.where(left, (on_target & after).sum(axis=0) / np.maximum((after).sum(axis=0), 1), np.nan)
+    fraction = np.where(left, (on_target & after).sum(axis=0) / np.maximum(after.sum(axis=0), 1), np.nan)
     return {
         "left_zone": left.astype(float),
         "first_exit_step": np.where(left, first + 1.0, np.nan),
