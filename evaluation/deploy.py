@@ -46,6 +46,46 @@ class Deployment:
         return np.stack([(self.rewards * (self.inner_episode == i)).sum(0) for i in range(k)])
 
 
+class CertaintyEquivalent:
+    """A task-aware agent made Bayes-adaptive by certainty equivalence.
+
+    At every step it is shown the exact belief's most probable task (ties go to the first support
+    point) in place of the true task, so it commits to a guess, acts on it, and switches as soon as the
+    belief does. Its online return is achievable without knowing the task: a lower bound on the
+    Bayes-optimal return, measured with the real cost of acting on a wrong guess (for cheetah-dir:
+    leaving the zone the wrong way and turning back), where `bayes_optimal_estimate` is an optimistic
+    upper estimate. Needs a task with a finite prior and an exact belief over its support.
+    """
+
+    def __init__(self, agent, support: np.ndarray):
+        self.agent = agent
+        self.support = np.asarray(support)
+
+    def act(self, obs: dict[str, np.ndarray], state=None, deterministic: bool = True, reward=None):
+        guess = dict(obs)
+        guess["task"] = self.support[np.argmax(obs["belief"], axis=-1)].astype(obs["task"].dtype)
+        return self.agent.act(guess, state, deterministic=deterministic, reward=reward)
+
+    def belief_features(self, state) -> np.ndarray:
+        return self.agent.belief_features(state)
+
+
+def reads_true_task(agent) -> bool:
+    """Whether `agent`'s policy is conditioned on the true task (the task-aware reference)."""
+    return getattr(agent.belief, "key", None) == "task"
+
+
+def certainty_equivalent_metrics(
+    agent, task: str, tasks: np.ndarray, episodes_per_task: int | None = None
+) -> dict | None:
+    """Deployment metrics of `CertaintyEquivalent(agent)`, or None where the task has no finite prior
+    or no exact belief (then certainty equivalence is not defined here)."""
+    support = suite.task_prior(task).support()
+    if support is None or suite.load(task, seed=0, privileged=True).task.prior_belief() is None:
+        return None
+    return deployment_metrics(deploy(CertaintyEquivalent(agent, support), task, tasks, episodes_per_task), task)
+
+
 def deploy(
     agent, task: str, tasks: np.ndarray, episodes_per_task: int | None = None, seed: int = EVAL_SEED
 ) -> Deployment:

@@ -23,6 +23,7 @@ SUMMARY_FIELDS = [
     "regret",
     "bayes_estimate",
     "gap_to_bayes",
+    "adaptive_reference_return",
     "left_zone",
     "first_exit_step",
     "correct_direction",
@@ -63,6 +64,11 @@ def summary_rows(records: list[dict]) -> list[dict]:
         if reference and estimator is not None:
             per_task = np.concatenate([r["final"]["online_return_per_task"] for r in reference])
             bayes = estimator(per_task)
+        adaptive = [
+            r["final"]["certainty_equivalent"]["online_return"]
+            for r in reference or []
+            if r["final"].get("certainty_equivalent")
+        ]
         coverage = [r["curve"][-1].get("coverage") for r in cell if r["curve"]]
         coverage = [c for c in coverage if c is not None]
         row = {
@@ -77,6 +83,7 @@ def summary_rows(records: list[dict]) -> list[dict]:
             "regret": None if ref is None else ref - float(returns.mean()),
             "bayes_estimate": bayes,
             "gap_to_bayes": None if bayes is None else bayes - float(returns.mean()),
+            "adaptive_reference_return": float(np.mean(adaptive)) if adaptive else None,
             "final_coverage": float(np.mean(coverage)) if coverage else None,
         }
         for metric in METRICS + _task_metric_names(cell):

@@ -16,6 +16,8 @@ import agents
 import suite
 from evaluation.deploy import deploy, deployment_metrics, evaluation_tasks
 from evaluation.stats import bootstrap_ci, iqm
+from suite.cheetah_dir import BACKWARD, FORWARD
+from suite.scripted import gait
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, str(ROOT / "evaluation" / "run.py")]
@@ -114,6 +116,11 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
         assert r["versions"]["mujoco"] == "3.17.0"
         assert {"probe_kl", "probe_kl_after", "informed_fraction"} <= set(final)
         assert all(0.0 < p["coverage"] <= 1.0 for p in r["curve"])
+        if r["agent"] == "task_aware":  # also deployed Bayes-adaptively (certainty equivalence)
+            ce = final["certainty_equivalent"]
+            assert len(ce["online_return_per_task"]) == 4 and "left_zone" in ce
+        else:
+            assert "certainty_equivalent" not in final
     with (out / "summary.csv").open() as f:
         rows = list(csv.DictReader(f))
     assert {(row["agent"], row["seeds"]) for row in rows} == {("oracle", "2"), ("varibad", "2"), ("task_aware", "2")}
@@ -124,12 +131,29 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
         reference = np.mean([r["final"]["online_return"] for r in records if r["agent"] == "task_aware"])
         assert float(row["regret"]) == pytest.approx(reference - np.mean(finals))
         assert float(row["bayes_estimate"]) <= reference + 1e-9
+        adaptive = [r["final"]["certainty_equivalent"]["online_return"] for r in records if r["agent"] == "task_aware"]
+        assert float(row["adaptive_reference_return"]) == pytest.approx(np.mean(adaptive))
     figures = sorted(p.name for p in (out / "figures").glob("*.png"))
     assert "curves_cheetah_dir_sparse.png" in figures
     assert "behaviour_oracle__cheetah_dir_sparse__s0.png" in figures
     assert all((out / "figures" / f).read_bytes()[:4] == b"\x89PNG" for f in figures)
     assert any((out / "tb").rglob("events.out.tfevents.*"))
     assert "oracle" in proc.stdout and "IQM" in proc.stdout  # the closing text table
+
+    # Grids from before `certainty_equivalent` existed get it from the saved reference agent, equal.
+    path = out / "cells" / "task_aware__cheetah_dir_sparse__s0" / "record.json"
+    record = json.loads(path.read_text())
+    expected = record["final"].pop("certainty_equivalent")
+    path.write_text(json.dumps(record))
+    proc = subprocess.run(
+        [sys.executable, "-m", "evaluation.reference", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "1 reference cells" in proc.stdout
+    again = json.loads(path.read_text())["final"]["certainty_equivalent"]
+    assert again["online_return_per_task"] == pytest.approx(expected["online_return_per_task"])
+    results = {(r["agent"], r["seed"]): r for r in json.loads((out / "results.json").read_text())}
+    assert results[("task_aware", 0)]["final"]["certainty_equivalent"]["online_return"] == again["online_return"]
 
 
 @pytest.mark.parametrize(
@@ -264,6 +288,42 @@ def test_bayes_optimal_estimate_by_hand():
     assert got == pytest.approx(((300 - 100) + (50 - 25) + (-10)) / 3)  # detour 2 * 5 m / 0.05 s = 200
     # The report asks the task: only cheetah-direction tasks define the estimate.
     assert suite.load("cheetah_dir_sparse", seed=0).task.bayes_optimal_estimate([300.0]) == pytest.approx(200.0)
+
+
+class _GaitFollower:
+    """A 'task-aware' agent: runs the scripted gait of whatever task it is shown; logs what it saw."""
+
+    def __init__(self):
+        self.shown = []
+
+    def act(self, obs, state=None, deterministic=True, reward=None):
+        step = 0 if state is None else state
+        self.shown.append(obs["task"][:, 0].copy())
+        action = np.stack([gait(float(d))(step) for d in obs["task"][:, 0]])
+        return action, step + 1
+
+    def belief_features(self, state):
+        return np.zeros((2, 0))
+
+
+def test_certainty_equivalent_shows_the_belief_mode_and_pays_the_wrong_guess():
+    from evaluation.deploy import CertaintyEquivalent
+
+    follower = _GaitFollower()
+    support = suite.task_prior("cheetah_dir_sparse").support()  # rows [backward], [forward]
+    tasks = np.array([[BACKWARD], [FORWARD]])
+    d = deploy(CertaintyEquivalent(follower, support), "cheetah_dir_sparse", tasks)
+    shown = np.stack(follower.shown)  # (T, 2)
+    x = d.observations["x_displacement"][..., 0]
+    # Until the first step ending outside the zone the belief is the prior: the tie goes to support[0].
+    exit_step = int(np.argmax(np.abs(x[:, 1]) >= 5.0))
+    assert np.all(shown[: exit_step + 1] == BACKWARD)
+    assert np.all(shown[exit_step + 1 :, 1] == FORWARD) and np.all(shown[:, 0] == BACKWARD)
+    assert x[exit_step, 1] <= -5.0  # the forward task's wrong guess left the zone backward
+    # A correct first guess costs nothing: the backward task earns what the true-task agent earns.
+    truthful = deploy(_GaitFollower(), "cheetah_dir_sparse", tasks)
+    assert d.rewards[:, 0].sum() == pytest.approx(truthful.rewards[:, 0].sum())
+    assert d.rewards[:, 1].sum() < truthful.rewards[:, 1].sum()  # the detour is paid
 
 
 def test_figure_2_config_is_valid():
