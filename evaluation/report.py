@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import functools
 from collections import defaultdict
 from pathlib import Path
 
@@ -35,8 +36,10 @@ SUMMARY_FIELDS = [
 METRICS = ("left_zone", "first_exit_step", "correct_direction", "stuck", "probe_kl_after", "probe_accuracy_after")
 
 
+@functools.cache
 def _bayes_estimator(task: str):
-    """The task's Bayes-optimal return estimator (from task-aware reference returns), or None."""
+    """The task's Bayes-optimal return estimator (from task-aware reference returns), or None; one
+    environment per task name, however many summary rows ask."""
     import suite
 
     return getattr(suite.load(task, seed=0).task, "bayes_optimal_estimate", None)

@@ -91,6 +91,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="render one deployment per agent and task (first seed) to OUT/videos/*.mp4 "
         "(needs MUJOCO_GL=egl or osmesa support; see evaluation/video.py)",
     )
+    p.add_argument(
+        "--video-tasks",
+        type=int,
+        default=1,
+        metavar="N",
+        help="with --video: deployments per video, on the first N held-out tasks (default 1)",
+    )
     p.add_argument("--resume", action="store_true", help="continue a grid in OUT (completed cells are kept)")
     p.add_argument("--force", action="store_true", help="delete OUT's previous results first")
     p.add_argument(
@@ -148,6 +155,8 @@ def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
             raise UsageError(f"unknown agent {name!r}; presets: {', '.join(agents.list_presets())}")
     if args.eval_tasks < 1 or (args.eval_every is not None and args.eval_every < 1):
         raise UsageError("--eval-tasks and --eval-every must be positive")
+    if args.video_tasks < 1:
+        raise UsageError(f"--video-tasks must be positive, got {args.video_tasks}")
     if args.episodes_per_task is not None and args.episodes_per_task < 1:
         raise UsageError(f"--episodes-per-task must be positive, got {args.episodes_per_task}")
     config = load_config_file(args.config)
@@ -245,7 +254,7 @@ def render_videos(args: argparse.Namespace) -> None:
     training ran without rendering."""
     gl = os.environ.get("MUJOCO_GL")
     env = {**os.environ, "MUJOCO_GL": gl if gl in ("egl", "osmesa", "glfw") else "egl"}
-    command = [sys.executable, "-m", "evaluation.video", str(args.out)]
+    command = [sys.executable, "-m", "evaluation.video", str(args.out), "--tasks", str(args.video_tasks)]
     if args.imports:
         command += ["--import", *args.imports]
     result = subprocess.run(command, env=env, cwd=Path(__file__).resolve().parents[1])

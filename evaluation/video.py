@@ -1,13 +1,16 @@
 """Videos of deployments: one MP4 per trained (agent, task) cell, with the task and belief overlaid.
 
-    MUJOCO_GL=egl python -m evaluation.video OUT [--cells AGENT__TASK__sSEED ...] [--width 320 --height 240]
+    MUJOCO_GL=egl python -m evaluation.video OUT [--cells AGENT__TASK__sSEED ...] [--tasks N]
+                                                 [--width 320 --height 240]
 
 renders, for each cell of a finished `evaluation/run.py` results folder OUT (default: the first seed
-of every (agent, task)), one deterministic deployment on the first held-out task to
-OUT/videos/<cell>.mp4 at the task's real-time frame rate. The task draws its decorations into the scene
-(e.g. the zone's borders, the goal); a caption shows the task, step, return so far and the exact
-belief where the task has one. Needs an off-screen OpenGL backend: MUJOCO_GL=egl (libegl1) or osmesa
-(Debian's libosmesa6); `evaluation/run.py --video` runs this module with MUJOCO_GL=egl.
+of every (agent, task)), deterministic deployments on the first N held-out tasks (default 1; a finite
+prior's support is covered in turn, so `--tasks 2` shows cheetah-dir's backward and forward task), one
+after the other in OUT/videos/<cell>.mp4 at the task's real-time frame rate. The task draws its
+decorations into the scene (e.g. the zone's borders, the goal); a caption shows the task, step, return
+so far and the exact belief where the task has one. Needs an off-screen OpenGL backend: MUJOCO_GL=egl
+(libegl1) or osmesa (Debian's libosmesa6); `evaluation/run.py --video` runs this module with
+MUJOCO_GL=egl.
 """
 
 from __future__ import annotations
@@ -72,16 +75,40 @@ def render_deployment(
     width: int = 320,
     height: int = 240,
 ) -> dict:
-    """Deploys `agent` once on `task` (deterministic actions, from the prior belief), writes the frames
-    to the MP4 `path`; returns {"return": ..., "frames": ..., "fps": ...}."""
+    """Deploys `agent` on `task` (deterministic actions, each deployment from the prior belief) once per
+    row of `task_parameters` (one task's parameters, or (N, P) for N tasks one after the other; default:
+    the first held-out task) and writes the frames to the MP4 `path`; returns
+    {"return": mean over the deployments, "returns": [...], "frames": ..., "fps": ...}."""
     import imageio_ffmpeg
 
     kwargs = {} if episodes_per_task is None else {"episodes_per_task": episodes_per_task}
     env = suite.load(task, seed=EVAL_SEED, privileged=True, **kwargs)
     if task_parameters is None:
-        task_parameters = evaluation_tasks(task, 1)[0]
-    env.task.force_task(task_parameters)
+        task_parameters = evaluation_tasks(task, 1)[:1]
+    task_parameters = np.asarray(task_parameters, dtype=np.float64)
+    if task_parameters.ndim < 2:
+        task_parameters = task_parameters.reshape(1, -1)
     fps = 1.0 / env.control_timestep()
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    writer = imageio_ffmpeg.write_frames(
+        str(path), (width, height), fps=fps, macro_block_size=1, output_params=["-loglevel", "error"]
+    )
+    writer.send(None)
+    returns, frames = [], 0
+    try:
+        for parameters in task_parameters:
+            env.task.force_task(parameters)
+            total, n = _render_one(agent, task, env, writer, width, height)
+            returns.append(total)
+            frames += n
+    finally:
+        writer.close()
+    return {"return": float(np.mean(returns)), "returns": returns, "frames": frames, "fps": fps}
+
+
+def _render_one(agent: agents.Agent, task: str, env, writer, width: int, height: int) -> tuple[float, int]:
+    """One deployment from reset into `writer`; returns (return, frames written)."""
     step = env.reset()
     state, total, t, frames = None, 0.0, 0, 0
 
@@ -102,27 +129,18 @@ def render_deployment(
             lines.append("exact belief " + " ".join(f"{p:.2f}" for p in env.task.belief))
         return _caption(pixels, lines)
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    writer = imageio_ffmpeg.write_frames(
-        str(path), (width, height), fps=fps, macro_block_size=1, output_params=["-loglevel", "error"]
-    )
-    writer.send(None)
-    try:
-        writer.send(np.ascontiguousarray(frame(0.0)))
+    writer.send(np.ascontiguousarray(frame(0.0)))
+    frames += 1
+    while not step.last():
+        obs = {k: np.asarray(v)[None] for k, v in step.observation.items()}
+        reward = None if state is None else np.array([step.reward])
+        action, state = agent.act(obs, state, deterministic=True, reward=reward)
+        step = env.step(action[0])
+        total += step.reward
+        t += 1
+        writer.send(np.ascontiguousarray(frame(total)))
         frames += 1
-        while not step.last():
-            obs = {k: np.asarray(v)[None] for k, v in step.observation.items()}
-            reward = None if state is None else np.array([step.reward])
-            action, state = agent.act(obs, state, deterministic=True, reward=reward)
-            step = env.step(action[0])
-            total += step.reward
-            t += 1
-            writer.send(np.ascontiguousarray(frame(total)))
-            frames += 1
-    finally:
-        writer.close()
-    return {"return": total, "frames": frames, "fps": fps}
+    return total, frames
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -139,6 +157,9 @@ def main(argv: list[str] | None = None) -> int:
         metavar="MODULE",
         help="modules or .py files registering the tasks (as for evaluation/run.py)",
     )
+    parser.add_argument(
+        "--tasks", type=int, default=1, metavar="N", help="deployments per video, on the first N held-out tasks"
+    )
     parser.add_argument("--width", type=int, default=320)
     parser.add_argument("--height", type=int, default=240)
     args = parser.parse_args(argv)
@@ -147,6 +168,9 @@ def main(argv: list[str] | None = None) -> int:
         print(
             f"evaluation/video.py: error: {args.out} holds no evaluation/run.py results (no grid.json)", file=sys.stderr
         )
+        return 2
+    if args.tasks < 1:
+        print(f"evaluation/video.py: error: --tasks must be >= 1, got {args.tasks}", file=sys.stderr)
         return 2
     grid = json.loads(grid_file.read_text())
     import_modules(args.imports)
@@ -160,9 +184,16 @@ def main(argv: list[str] | None = None) -> int:
         task = cell.split("__")[1]
         path = args.out / "videos" / f"{cell}.mp4"
         info = render_deployment(
-            agent, task, path, episodes_per_task=grid.get("episodes_per_task"), width=args.width, height=args.height
+            agent,
+            task,
+            path,
+            task_parameters=evaluation_tasks(task, args.tasks)[: args.tasks],
+            episodes_per_task=grid.get("episodes_per_task"),
+            width=args.width,
+            height=args.height,
         )
-        print(f"{path}: {info['frames']} frames at {info['fps']:.0f} fps, return {info['return']:.1f}")
+        returns = ", ".join(f"{r:.1f}" for r in info["returns"])
+        print(f"{path}: {info['frames']} frames at {info['fps']:.0f} fps, returns {returns}")
     return 0
 
 

@@ -132,6 +132,7 @@ class PointRobotGoal(MetaTask):
         if goal_radius <= 0:
             raise ValueError(f"goal_radius must be > 0, got {goal_radius}")
         super().__init__(HalfCircleGoalPrior(num_goals=num_goals), task=goal, **kwargs)
+        self._support = self._prior.support()  # the candidate goals the belief is over (None: continuous)
         self.sparse = bool(sparse)
         self.goal_radius = float(goal_radius)
         self._action_spec = None
@@ -146,7 +147,7 @@ class PointRobotGoal(MetaTask):
             task = np.asarray(task, dtype=np.float64)
             if task.shape != (2,) or not np.all(np.isfinite(task)):
                 raise ValueError(f"goal must be a finite (x, y) pair or None, got {task!r}")
-            support = self._prior.support()
+            support = self._prior.support()  # (called from MetaTask.__init__, before self._support)
             if support is not None and not np.any(np.all(np.isclose(support, task), axis=1)):
                 raise ValueError(
                     f"goal {task.tolist()} is not one of the prior's {len(support)} goals: {support.tolist()}"
@@ -189,9 +190,8 @@ class PointRobotGoal(MetaTask):
         position = physics.robot_position()
         reward = float(goal_reward(position, self._task, self.sparse, self.goal_radius))
         if self._belief is not None:
-            support = self._prior.support()
             self._belief = belief_update(
-                self._belief[None], support, position[None], np.array([reward]), self.sparse, self.goal_radius
+                self._belief[None], self._support, position[None], np.array([reward]), self.sparse, self.goal_radius
             )[0]
         return reward
 

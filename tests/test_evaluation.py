@@ -162,6 +162,7 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
         (["--agents", "orakel", "--tasks", "cheetah_dir_sparse"], "unknown agent 'orakel'"),
         (["--agents", "oracle", "--tasks", "cheetah_sparse"], "unknown task 'cheetah_sparse'"),
         (["--agents", "oracle", "--tasks", "cheetah_dir", "--frames", "0"], "--frames must be positive"),
+        (["--agents", "oracle", "--tasks", "cheetah_dir", "--video-tasks", "0"], "--video-tasks must be positive"),
     ],
 )
 def test_bad_arguments_exit_2_with_one_line(tmp_path, args, message):

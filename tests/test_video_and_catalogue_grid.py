@@ -23,7 +23,7 @@ def test_grid_skips_incompatible_pairs_reports_task_metrics_and_renders_videos(t
     out = tmp_path / "out"
     args = ["--agents", "oracle", "hyperx", "--tasks", "point_robot_sparse", "point_treasure_sparse"]
     args += ["--seeds", "0", "--frames", "400", "--eval-tasks", "2", "--no-reference", "--workers", "1"]
-    args += ["--no-progress", "--video", "--config", config, "--out", out]
+    args += ["--no-progress", "--video", "--video-tasks", "2", "--config", config, "--out", out]
     env = {**os.environ, "MUJOCO_GL": "disable"}  # training without rendering; --video switches to egl
     result = subprocess.run(
         [sys.executable, str(ROOT / "evaluation" / "run.py"), *map(str, args)],
@@ -58,12 +58,16 @@ def test_grid_skips_incompatible_pairs_reports_task_metrics_and_renders_videos(t
     meta = next(reader)
     frames = np.stack([np.frombuffer(f, np.uint8).reshape(240, 320, 3) for f in reader])
     assert meta["size"] == (320, 240) and meta["fps"] == 20.0
-    assert len(frames) == 101  # the first observation + 2 MDP episodes of 50 steps
+    assert len(frames) == 2 * 101  # two tasks: each the first observation + 2 MDP episodes of 50 steps
     caption, scene = frames[:, :40].astype(float), frames[:, 60:].astype(float)
     assert (caption < 40).mean() > 0.7 and (caption > 200).mean() > 0.02  # white text on black
     # The scene: the light floor with the grey candidate discs and the green goal drawn into it.
     green = (scene[..., 1] > scene[..., 0] + 40) & (scene[..., 1] > scene[..., 2] + 40)
     assert green.any(axis=(1, 2)).all()
+    # The second deployment is on the second held-out task: its goal is drawn elsewhere.
+    columns = np.arange(scene.shape[2])
+    goal_x = [(green[i].sum(0) * columns).sum() / green[i].sum() for i in (0, 101)]
+    assert abs(goal_x[0] - goal_x[1]) > 20
 
 
 def test_bonuses_read_the_position_keys_the_task_declares():
