@@ -149,6 +149,7 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
     figures.mkdir(parents=True, exist_ok=True)
     written = []
     tasks = sorted({r["task"] for r in records})
+    bracket = {row["task"]: row for row in summary_rows(records)}  # Bayes-optimal bracket per task
     for task in tasks:
         fig, (ax, cov_ax) = plt.subplots(1, 2, figsize=(11, 4))
         agents_ = sorted({r["agent"] for r in records if r["task"] == task})
@@ -167,6 +168,13 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
                 mean, low, high = mean_ci_curve(coverage)
                 cov_ax.plot(frames, mean, color=line.get_color(), label=agent)
                 cov_ax.fill_between(frames, low, high, color=line.get_color(), alpha=0.2)
+        row = bracket.get(task, {})
+        for key, label, style in (
+            ("bayes_estimate", "Bayes-optimal, upper estimate", "--"),
+            ("adaptive_reference_return", "Bayes-adaptive reference (lower bound)", ":"),
+        ):
+            if row.get(key) is not None:
+                ax.axhline(row[key], color="0.3", linestyle=style, linewidth=1, label=label)
         ax.set_xlabel("frames")
         ax.set_ylabel("online return at deployment")
         ax.set_title(task)
