@@ -5,7 +5,9 @@ The probe maps the agent's belief features at each step to a distribution over t
 is fit (soft targets: the exact posterior) on half of the deployments and scored on the other half.
 Reported: the excess cross-entropy KL(exact ‖ probe) in nats (0 = the features determine the exact
 belief) overall, before and after the first informative step (where the exact belief first changes),
-and the accuracy of the probe's most likely task after it (where the exact belief is one-hot).
+and the accuracy of the probe's most likely task after it (where the exact belief is one-hot); and the
+same per step of the BAMDP episode (`probe_kl_per_step`, `probe_accuracy_per_step`: mean over the test
+deployments; accuracy counts informed steps only, None where no test deployment is informed yet).
 """
 
 from __future__ import annotations
@@ -58,7 +60,7 @@ def _kl(targets: np.ndarray, log_probs: np.ndarray) -> np.ndarray:
     return terms.sum(-1)
 
 
-def belief_quality(features: np.ndarray, exact: np.ndarray) -> dict[str, float | None]:
+def belief_quality(features: np.ndarray, exact: np.ndarray) -> dict:
     """Probe scores from (T, M, F) belief features and (T, M, B) exact beliefs of M deployments.
 
     Deployments alternate between the probe's training and test halves (so both see every task).
@@ -77,8 +79,13 @@ def belief_quality(features: np.ndarray, exact: np.ndarray) -> dict[str, float |
     changed = np.any(np.abs(target - target[:1]) > 1e-9, axis=-1)  # the exact belief has moved from the prior
     informed = np.cumsum(changed, axis=0) > 0
     after = kl[informed]
-    correct = (log_probs.argmax(-1) == target.argmax(-1))[informed]
+    hits = log_probs.argmax(-1) == target.argmax(-1)
+    correct = hits[informed]
+    informed_count = informed.sum(1)
+    accuracy_per_step = np.where(informed_count > 0, (hits & informed).sum(1) / np.maximum(informed_count, 1), np.nan)
     return {
+        "probe_kl_per_step": kl.mean(1).tolist(),
+        "probe_accuracy_per_step": [None if np.isnan(a) else float(a) for a in accuracy_per_step],
         "probe_kl": float(kl.mean()),
         "probe_kl_before": float(kl[~informed].mean()) if (~informed).any() else None,
         "probe_kl_after": float(after.mean()) if after.size else None,

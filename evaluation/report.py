@@ -187,11 +187,45 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
         fig.savefig(path, dpi=100)
         plt.close(fig)
         written.append(path)
+    for task in tasks:
+        path = _probe_plot(records, task, figures, plt)
+        if path is not None:
+            written.append(path)
     for cells in _by_agent_task(records).values():
         path = _behaviour_plot(out, min(cells, key=lambda r: r["seed"]), figures, plt)
         if path is not None:
             written.append(path)
     return written
+
+
+def _probe_plot(records: list[dict], task: str, figures: Path, plt) -> Path | None:
+    """Belief probe per step of the BAMDP episode: KL(exact ‖ probe) and accuracy, mean over seeds."""
+    by_agent = defaultdict(list)
+    for r in records:
+        if r["task"] == task and r.get("final") and r["final"].get("probe_kl_per_step"):
+            by_agent[r["agent"]].append(r["final"])
+    if not by_agent:
+        return None
+    fig, (kl_ax, acc_ax) = plt.subplots(1, 2, figsize=(11, 3.8))
+    for agent, finals in sorted(by_agent.items()):
+        kl = np.mean([f["probe_kl_per_step"] for f in finals], axis=0)
+        acc = np.array([[np.nan if a is None else a for a in f["probe_accuracy_per_step"]] for f in finals])
+        steps = np.arange(1, len(kl) + 1)
+        (line,) = kl_ax.plot(steps, kl, label=f"{agent} ({len(finals)})")
+        with np.errstate(all="ignore"):
+            acc_ax.plot(steps, np.nanmean(acc, axis=0), color=line.get_color(), label=agent)
+    kl_ax.set_xlabel("step of the BAMDP episode")
+    kl_ax.set_ylabel("KL(exact belief ‖ probe) (nats)")
+    kl_ax.set_title(f"belief probe on held-out deployments, {task}")
+    kl_ax.legend(fontsize=8)
+    acc_ax.set_xlabel("step of the BAMDP episode")
+    acc_ax.set_ylabel("probe accuracy (informed deployments)")
+    acc_ax.set_ylim(-0.05, 1.05)
+    fig.tight_layout()
+    path = figures / f"probe_{task}.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def _behaviour_plot(out: Path, record: dict, figures: Path, plt) -> Path | None:

@@ -134,24 +134,33 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
         adaptive = [r["final"]["certainty_equivalent"]["online_return"] for r in records if r["agent"] == "task_aware"]
         assert float(row["adaptive_reference_return"]) == pytest.approx(np.mean(adaptive))
     figures = sorted(p.name for p in (out / "figures").glob("*.png"))
-    assert "curves_cheetah_dir_sparse.png" in figures
+    assert "curves_cheetah_dir_sparse.png" in figures and "probe_cheetah_dir_sparse.png" in figures
+    assert all(len(r["final"]["probe_kl_per_step"]) == 200 for r in records)  # one BAMDP episode of 200 steps
     assert "behaviour_oracle__cheetah_dir_sparse__s0.png" in figures
     assert all((out / "figures" / f).read_bytes()[:4] == b"\x89PNG" for f in figures)
     assert any((out / "tb").rglob("events.out.tfevents.*"))
     assert "oracle" in proc.stdout and "IQM" in proc.stdout  # the closing text table
 
-    # Grids from before `certainty_equivalent` existed get it from the saved reference agent, equal.
+    # Grids from before `certainty_equivalent` and the per-step probe existed get them from what the
+    # cells saved (the reference agent; the deployment's features and beliefs), equal to a fresh run's.
     path = out / "cells" / "task_aware__cheetah_dir_sparse__s0" / "record.json"
-    record = json.loads(path.read_text())
+    varibad_path = out / "cells" / "varibad__cheetah_dir_sparse__s1" / "record.json"
+    record, varibad = json.loads(path.read_text()), json.loads(varibad_path.read_text())
     expected = record["final"].pop("certainty_equivalent")
+    expected_kl = varibad["final"].pop("probe_kl_per_step")
+    del varibad["final"]["probe_accuracy_per_step"]
     path.write_text(json.dumps(record))
+    varibad_path.write_text(json.dumps(varibad))
     proc = subprocess.run(
-        [sys.executable, "-m", "evaluation.reference", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300
+        [sys.executable, "-m", "evaluation.backfill", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300
     )
     assert proc.returncode == 0, proc.stderr
-    assert "1 reference cells" in proc.stdout
+    assert "2 cells updated" in proc.stdout
     again = json.loads(path.read_text())["final"]["certainty_equivalent"]
     assert again["online_return_per_task"] == pytest.approx(expected["online_return_per_task"])
+    refit = json.loads(varibad_path.read_text())["final"]
+    assert refit["probe_kl_per_step"] == pytest.approx(expected_kl, rel=1e-5, abs=1e-7)
+    assert refit["probe_kl"] == pytest.approx(varibad["final"]["probe_kl"], rel=1e-5, abs=1e-7)
     results = {(r["agent"], r["seed"]): r for r in json.loads((out / "results.json").read_text())}
     assert results[("task_aware", 0)]["final"]["certainty_equivalent"]["online_return"] == again["online_return"]
 
@@ -262,7 +271,7 @@ def test_hyperstate_coverage_known_cases():
 
 def _exact_beliefs(t_len=60, m=20, seed=0):
     rng = np.random.default_rng(seed)
-    forward = np.arange(m) % 2  # tasks alternate, so train and test halves both see each
+    forward = (np.arange(m) // 2) % 2  # the probe's train (even) and test (odd) halves both see each task
     reveal = rng.integers(10, 50, m)
     exact = np.full((t_len, m, 2), 0.5)
     for i in range(m):
@@ -277,8 +286,15 @@ def test_belief_probe_is_perfect_on_the_exact_belief_and_blind_without_features(
     perfect = belief_quality(exact + 1e-3 * np.random.default_rng(1).normal(size=exact.shape), exact)
     assert perfect["probe_kl_after"] < 0.05 and perfect["probe_accuracy_after"] == 1.0
     assert perfect["probe_kl_before"] < 0.05  # the prior is recognised as the prior too
+    # Per step of the BAMDP: no test deployment is informed before step 10, all are by step 50.
+    assert len(perfect["probe_kl_per_step"]) == 60 and max(perfect["probe_kl_per_step"]) < 0.05
+    assert perfect["probe_accuracy_per_step"][:10] == [None] * 10
+    assert all(a in (None, 1.0) for a in perfect["probe_accuracy_per_step"][10:50])
+    assert perfect["probe_accuracy_per_step"][50:] == [1.0] * 10
     blind = belief_quality(np.zeros((*exact.shape[:2], 0)), exact)  # e.g. the Markov agent: no features
-    assert blind["probe_kl_after"] > 0.4  # it can only guess the marginal (KL ≈ ln 2 after the reveal)
+    # It can only guess the marginal (0.5, 0.5): right before any reveal, ln 2 nats off once revealed.
+    assert blind["probe_kl_after"] == pytest.approx(np.log(2), abs=0.02)
+    assert blind["probe_kl_per_step"][0] < 0.01 and blind["probe_kl_per_step"][-1] == pytest.approx(np.log(2), abs=0.02)
     assert 0.0 < blind["informed_fraction"] == perfect["informed_fraction"] < 1.0
 
 
