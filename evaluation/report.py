@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import functools
+import warnings
 from collections import defaultdict
 from pathlib import Path
 
@@ -212,7 +213,8 @@ def _probe_plot(records: list[dict], task: str, figures: Path, plt) -> Path | No
         acc = np.array([[np.nan if a is None else a for a in f["probe_accuracy_per_step"]] for f in finals])
         steps = np.arange(1, len(kl) + 1)
         (line,) = kl_ax.plot(steps, kl, label=f"{agent} ({len(finals)})")
-        with np.errstate(all="ignore"):
+        with warnings.catch_warnings():  # steps where no deployment is informed yet: NaN, not drawn
+            warnings.simplefilter("ignore", RuntimeWarning)
             acc_ax.plot(steps, np.nanmean(acc, axis=0), color=line.get_color(), label=agent)
     kl_ax.set_xlabel("step of the BAMDP episode")
     kl_ax.set_ylabel("KL(exact belief ‖ probe) (nats)")
