@@ -29,6 +29,7 @@ class TaskEntry:
     batch_factory: Callable[..., BatchEnv] | None = None
     metrics: Callable[..., dict] | None = None
     position_keys: tuple[str, ...] | None = None
+    reference_task: str | None = None
 
 
 _REGISTRY: dict[str, TaskEntry] = {}
@@ -43,6 +44,7 @@ def register(
     batch: Callable[..., BatchEnv] | None = None,
     metrics: Callable[..., dict] | None = None,
     position_keys: tuple[str, ...] | None = None,
+    reference_task: str | None = None,
 ) -> Callable[[Factory], Factory]:
     """Decorator registering `factory(seed=None, **kwargs)` under `name`.
 
@@ -53,9 +55,14 @@ def register(
     ((T, M, ...) observations each step ended in, (T, M) rewards, (M, P) true tasks).
     `position_keys`, if given, names the observations that say where the agent is (what state-based
     exploration bonuses look at by default, e.g. `("x_displacement",)`).
+    `reference_task`, if given, names a registered task with the same observations, actions and task
+    prior but a dense reward (e.g. `cheetah_dir` for `cheetah_dir_sparse`): the task-aware reference
+    policy learns it there and is deployed on this task (evaluation/run.py).
     """
     if not isinstance(name, str) or not name:
         raise ValueError(f"task name must be a non-empty string, got {name!r}")
+    if reference_task is not None and (not isinstance(reference_task, str) or reference_task == name):
+        raise ValueError(f"reference_task must be another task's name, got {reference_task!r}")
 
     def decorator(factory: Factory) -> Factory:
         if name in _REGISTRY:
@@ -63,7 +70,7 @@ def register(
         if "seed" not in inspect.signature(factory).parameters:
             raise TypeError(f"factory for {name!r} must accept a `seed` keyword argument")
         _REGISTRY[name] = TaskEntry(
-            name, factory, batch, metrics, None if position_keys is None else tuple(position_keys)
+            name, factory, batch, metrics, None if position_keys is None else tuple(position_keys), reference_task
         )
         TASKS[:] = sorted(_REGISTRY)
         return factory
@@ -86,6 +93,14 @@ def exploration_metrics(name: str) -> Callable[..., dict] | None:
 def position_keys(name: str) -> tuple[str, ...] | None:
     """The observation keys task `name` declares as its position (for state bonuses), or None."""
     return _lookup(name).position_keys
+
+
+def reference_task(name: str) -> str | None:
+    """The registered dense counterpart of task `name` (where its task-aware reference learns), or None."""
+    reference = _lookup(name).reference_task
+    if reference is not None and reference not in _REGISTRY:
+        raise ValueError(f"task {name!r} names reference_task {reference!r}, which is not registered")
+    return reference
 
 
 def task_prior(name: str, **kwargs: Any):

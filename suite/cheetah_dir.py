@@ -173,7 +173,11 @@ def _register(name: str, zone_radius: float) -> None:
     factory.__name__ = factory.__qualname__ = name
     factory.__doc__ = f"`{name}`: cheetah-direction meta-task, zone radius {zone_radius} m (see suite.cheetah_dir)."
     metrics = functools.partial(zone_exploration_metrics, zone_radius=zone_radius)
-    register(name, batch=batch_factory, metrics=metrics, position_keys=("x_displacement",))(factory)
+    # The sparse task's task-aware reference learns on the dense task (same observations and prior).
+    reference = "cheetah_dir" if zone_radius > 0 else None
+    register(name, batch=batch_factory, metrics=metrics, position_keys=("x_displacement",), reference_task=reference)(
+        factory
+    )
 
 
 _register("cheetah_dir_sparse", ZONE_RADIUS)

@@ -143,7 +143,11 @@ def _register(name: str, zone_radius: float) -> None:
     def metrics(observations, rewards, tasks, zone_radius: float = zone_radius, **_):
         return velocity_metrics(observations, rewards, tasks, zone_radius=zone_radius)
 
-    register(name, batch=batch_factory, metrics=metrics, position_keys=("x_displacement",))(factory)
+    # The sparse task's task-aware reference learns on the dense task (same observations and prior).
+    reference = "cheetah_vel" if zone_radius > 0 else None
+    register(name, batch=batch_factory, metrics=metrics, position_keys=("x_displacement",), reference_task=reference)(
+        factory
+    )
 
 
 _register("cheetah_vel_sparse", ZONE_RADIUS)

@@ -251,7 +251,15 @@ def goal_metrics(
     }
 
 
-def _register(name: str, *, sparse: bool, num_goals: int | None, episode_length: int, episodes_per_task: int) -> None:
+def _register(
+    name: str,
+    *,
+    sparse: bool,
+    num_goals: int | None,
+    episode_length: int,
+    episodes_per_task: int,
+    reference_task: str | None = None,
+) -> None:
     def factory(
         seed: SeedLike = None,
         *,
@@ -299,10 +307,19 @@ def _register(name: str, *, sparse: bool, num_goals: int | None, episode_length:
     def metrics(observations, rewards, tasks, goal_radius: float = GOAL_RADIUS, **_):
         return goal_metrics(observations, rewards, tasks, goal_radius=goal_radius)
 
-    register(name, batch=batch_factory, metrics=metrics, position_keys=("position",))(factory)
+    register(name, batch=batch_factory, metrics=metrics, position_keys=("position",), reference_task=reference_task)(
+        factory
+    )
 
 
-_register("point_robot_sparse", sparse=True, num_goals=None, episode_length=EPISODE_LENGTH, episodes_per_task=1)
+_register(
+    "point_robot_sparse",
+    sparse=True,
+    num_goals=None,
+    episode_length=EPISODE_LENGTH,
+    episodes_per_task=1,
+    reference_task="point_robot",  # same observations and prior, dense reward
+)
 _register("point_robot", sparse=False, num_goals=None, episode_length=EPISODE_LENGTH, episodes_per_task=1)
 _register(
     "point_treasure_sparse",

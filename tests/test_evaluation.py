@@ -116,6 +116,8 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
         assert r["versions"]["mujoco"] == "3.17.0"
         assert {"probe_kl", "probe_kl_after", "informed_fraction"} <= set(final)
         assert all(0.0 < p["coverage"] <= 1.0 for p in r["curve"])
+        # The task-aware reference learns the dense counterpart; every agent is deployed on the task.
+        assert r["trained_on"] == ("cheetah_dir" if r["agent"] == "task_aware" else "cheetah_dir_sparse")
         if r["agent"] == "task_aware":  # also deployed Bayes-adaptively (certainty equivalence)
             ce = final["certainty_equivalent"]
             assert len(ce["online_return_per_task"]) == 4 and "left_zone" in ce

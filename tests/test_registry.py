@@ -117,6 +117,27 @@ def test_duplicate_and_malformed_registrations(slider_task):
     assert "no_seed_task" not in suite.TASKS
 
 
+def test_reference_tasks_are_dense_counterparts_with_the_same_interface():
+    pairs = {t: suite.reference_task(t) for t in suite.TASKS if suite.reference_task(t)}
+    assert pairs == {
+        "cheetah_dir_sparse": "cheetah_dir",
+        "cheetah_vel_sparse": "cheetah_vel",
+        "point_robot_sparse": "point_robot",
+    }
+    for sparse, dense in pairs.items():
+        a, b = suite.load(sparse, seed=0, privileged=True), suite.load(dense, seed=0, privileged=True)
+        assert a.observation_spec() == b.observation_spec() and a.action_spec() == b.action_spec()
+        assert type(suite.task_prior(sparse)) is type(suite.task_prior(dense))
+    with pytest.raises(ValueError, match="reference_task must be another task's name"):
+        suite.register("self_reference", reference_task="self_reference")
+    suite.register("dangling_reference", reference_task="no_such_task")(lambda seed=None: None)
+    try:
+        with pytest.raises(ValueError, match="names reference_task 'no_such_task', which is not registered"):
+            suite.reference_task("dangling_reference")
+    finally:
+        suite.unregister("dangling_reference")
+
+
 def test_spawn_seeds_are_reproducible():
     a, b = suite.spawn_seeds(5, 3), suite.spawn_seeds(5, 3)
     assert [s.generate_state(2).tolist() for s in a] == [s.generate_state(2).tolist() for s in b]
