@@ -1,10 +1,11 @@
 #!/usr/bin/env bash
-# Reproduce the paper's Figure 2 on cheetah_dir_sparse: 6 presets x 3 seeds (+ the task-aware reference).
+# Reproduce the paper's Figure 2 on cheetah_dir_sparse: 6 presets x 3 seeds (+ the task-aware reference,
+# which learns the dense cheetah_dir and is deployed on cheetah_dir_sparse). See docs/results.md.
 #   bash bench/reproduce_fig2.sh [FRAMES] [OUT]
 # Resumable: rerun the same command after an interruption (it passes --resume when OUT exists).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-FRAMES=${1:-5000000}
+FRAMES=${1:-4000000}
 OUT=${2:-runs/fig2}
 RESUME=()
 [ -f "$OUT/grid.json" ] && RESUME=(--resume)
