@@ -132,7 +132,7 @@ def training_task(spec: CellSpec, agent) -> str:
     cheetah_dir_sparse it never leaves the zone), and the reference is meant to show how well the task
     can be solved once it is known. It is deployed on the task itself like every agent."""
     dense = suite.reference_task(spec.task)
-    return dense if dense is not None and agent.config.belief == "task_aware" else spec.task
+    return dense if dense is not None and reads_true_task(agent) else spec.task
 
 
 def run_cell(spec: CellSpec) -> dict:

@@ -71,8 +71,9 @@ class CertaintyEquivalent:
 
 
 def reads_true_task(agent) -> bool:
-    """Whether `agent`'s policy is conditioned on the true task (the task-aware reference)."""
-    return getattr(agent.belief, "key", None) == "task"
+    """Whether `agent`'s policy is conditioned on the true task (the task-aware reference); answers
+    from the config, so before training too."""
+    return agent.config.belief == "task_aware"
 
 
 def certainty_equivalent_metrics(

@@ -131,8 +131,10 @@ class PointRobotGoal(MetaTask):
     ):
         if goal_radius <= 0:
             raise ValueError(f"goal_radius must be > 0, got {goal_radius}")
-        super().__init__(HalfCircleGoalPrior(num_goals=num_goals), task=goal, **kwargs)
-        self._support = self._prior.support()  # the candidate goals the belief is over (None: continuous)
+        prior = HalfCircleGoalPrior(num_goals=num_goals)
+        # The candidate goals the belief is over (None: continuous); set first, force_task checks goals.
+        self._support = prior.support()
+        super().__init__(prior, task=goal, **kwargs)
         self.sparse = bool(sparse)
         self.goal_radius = float(goal_radius)
         self._action_spec = None
@@ -147,7 +149,7 @@ class PointRobotGoal(MetaTask):
             task = np.asarray(task, dtype=np.float64)
             if task.shape != (2,) or not np.all(np.isfinite(task)):
                 raise ValueError(f"goal must be a finite (x, y) pair or None, got {task!r}")
-            support = self._prior.support()  # (called from MetaTask.__init__, before self._support)
+            support = self._support
             if support is not None and not np.any(np.all(np.isclose(support, task), axis=1)):
                 raise ValueError(
                     f"goal {task.tolist()} is not one of the prior's {len(support)} goals: {support.tolist()}"
@@ -164,7 +166,7 @@ class PointRobotGoal(MetaTask):
 
     def markers(self, physics: Physics) -> list[Marker]:
         """The candidate goals of a finite prior, as grey discs (the true goal is the model's green site)."""
-        support = self._prior.support()
+        support = self._support
         if support is None:
             return []
         return [Marker("cylinder", (*g, 0.001), (self.goal_radius, 0.001, 0.0), (0.5, 0.5, 0.5, 0.4)) for g in support]
