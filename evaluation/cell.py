@@ -62,9 +62,18 @@ class CellSpec:
 
 
 def write_json_atomic(path: Path, data: Any) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(data, indent=1, default=_json_default))
-    os.replace(tmp, path)
+    """Writes through a temporary file of a unique name: concurrent writers never share it."""
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        os.fchmod(fd, 0o644)  # mkstemp makes it private; results are for everyone to read
+        with os.fdopen(fd, "w") as f:
+            f.write(json.dumps(data, indent=1, default=_json_default))
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
 
 
 def _json_default(value: Any) -> Any:
@@ -196,6 +205,9 @@ def run_cell(spec: CellSpec) -> dict:
                 writer.add_scalar(key if "/" in key else f"train/{key}", value, frames)
         if log["iteration"] % every == 0 or log["iteration"] == iterations:
             evaluate(frames)
+            # The agent at every evaluation point, for diagnostics through training (bonus heat maps).
+            (directory / "snapshots").mkdir(exist_ok=True)
+            agent.save(directory / "snapshots" / f"agent_{frames:09d}.pt")
             np.save(coverage_path, coverage.visited)
             write_json_atomic(record_path, record)
             write_results(Path(spec.out))
