@@ -9,9 +9,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from agents.agent import Agent, AgentState
-from agents.config import AgentConfig, BonusConfig, PPOConfig, RecurrentConfig, VAEConfig, apply_overrides
-from agents.presets import PRESETS, get_preset, list_presets
+from hyperstate.agents.agent import Agent, AgentState
+from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig, RecurrentConfig, VAEConfig, apply_overrides
+from hyperstate.agents.presets import PRESETS, get_preset, list_presets
 
 
 def make(preset: str, **overrides: Any) -> Agent:

@@ -22,13 +22,14 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-import suite
-from agents import config as config_lib
-from agents.beliefs import Trajectories, Transition, make_belief
-from agents.bonuses import BonusInput, make_bonus
-from agents.config import AgentConfig
-from agents.normalization import ReturnScaler, RunningMeanStd
-from agents.ppo import ActorCritic, compute_gae, gaussian_log_prob, ppo_update
+from hyperstate import suite
+from hyperstate.agents import config as config_lib
+from hyperstate.agents import serialization
+from hyperstate.agents.beliefs import Trajectories, Transition, make_belief
+from hyperstate.agents.bonuses import BonusInput, make_bonus
+from hyperstate.agents.config import AgentConfig
+from hyperstate.agents.normalization import ReturnScaler, RunningMeanStd
+from hyperstate.agents.ppo import ActorCritic, compute_gae, gaussian_log_prob, ppo_update
 
 PRIVILEGED_KEYS = ("belief", "task")
 
@@ -209,6 +210,25 @@ class Agent:
         """The belief features of a deployment state (what the policy conditions on)."""
         return self.belief.features(state.belief).numpy()
 
+    def bonus_values(self, obs: dict[str, np.ndarray], features: np.ndarray) -> dict[str, np.ndarray]:
+        """What each bonus would pay for arriving at observations `obs` (a batch) with belief features
+        `features` ((M, F)), learning nothing from it; only bonuses with a pure `value` (RND and its
+        ensemble; not the VAE error, which needs a whole transition). For diagnostics such as the paper's
+        Figure 1 (evaluation/diagnostics.py)."""
+        if not self._built:
+            raise RuntimeError("agent has no networks yet: train() or load() it first")
+        next_state = torch.as_tensor(self._state_vector(obs), dtype=torch.float32)
+        m = len(next_state)
+        batch = BonusInput(
+            state=next_state,
+            action=torch.zeros(m, self.action_dim),
+            reward=torch.zeros(m, 1),
+            next_state=next_state,
+            features=torch.as_tensor(features, dtype=torch.float32),
+            next_features=torch.as_tensor(features, dtype=torch.float32),
+        )
+        return {b.name: b.value(batch).numpy() for b in self.bonuses if hasattr(b, "value")}
+
     # Training ---------------------------------------------------------------------------------------
     def check_task(self, task: str, task_kwargs: dict | None = None) -> None:
         """Raises ValueError (naming what is missing) if this agent cannot run on `task`, e.g. the
@@ -266,7 +286,7 @@ class Agent:
         }
         start_iteration, elapsed = 0, 0.0
         if resume and ckpt is not None and ckpt.exists():
-            saved = torch.load(ckpt, weights_only=False)
+            saved = serialization.load(ckpt, kind="checkpoint")
             same = (saved["config"], saved["task"], saved["seed"], saved["frames"]) == (
                 config_lib.to_dict(cfg),
                 task,
@@ -431,19 +451,28 @@ class Agent:
             for bonus in self.bonuses:
                 raw_bonuses.append(bonus.reward(flat).numpy().astype(np.float64).reshape(t_len, n))
                 log.update(bonus.update(flat))
+        anneal = 1.0 - iteration / iterations if cfg.anneal_bonus else 1.0
         reward, scaled_bonuses = combine_rewards(
             extrinsic,
             raw_bonuses,
             weights=[b.weight for b in cfg.bonuses],
-            anneal=1.0 - iteration / iterations if cfg.anneal_bonus else 1.0,
+            anneal=anneal,
             lasts=lasts,
             ext_scaler=ext_scaler if p.norm_reward else None,
             bonus_scalers=bonus_scalers,
             reward_clip=p.reward_clip,
         )
-        for bonus, raw, scaled in zip(self.bonuses, raw_bonuses, scaled_bonuses, strict=True):
+        weighted = {}
+        for bonus, config, raw, scaled in zip(self.bonuses, cfg.bonuses, raw_bonuses, scaled_bonuses, strict=True):
             log[f"bonus/{bonus.name}/raw_mean"] = float(raw.mean())
             log[f"bonus/{bonus.name}/scaled_mean"] = float(scaled.mean())
+            weighted[bonus.name] = anneal * config.weight * scaled
+        if weighted:
+            # Each stream's share of the reward PPO sees (mean magnitude after normalisation and weighting).
+            magnitude = {"extrinsic": float(np.abs(reward - sum(weighted.values())).mean())}
+            magnitude.update({name: float(np.abs(w).mean()) for name, w in weighted.items()})
+            total = sum(magnitude.values()) or 1.0
+            log.update({f"reward_share/{name}": m / total for name, m in magnitude.items()})
         advantages, returns = compute_gae(
             reward,
             rollout["values"].numpy(),
@@ -528,7 +557,7 @@ class Agent:
         }
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_suffix(".tmp")
-        torch.save(state, tmp)
+        serialization.save(state, tmp, kind="checkpoint")
         os.replace(tmp, path)  # atomic: a crash leaves the previous checkpoint intact
 
     def _load_training_state(self, saved, env, ext_scaler, bonus_scalers, buffer) -> None:
@@ -544,10 +573,10 @@ class Agent:
         torch.set_rng_state(saved["torch_rng"])
 
     def save(self, path: str | os.PathLike) -> None:
-        """Saves what deployment needs: config, specs and trained networks/statistics."""
+        """Saves what deployment needs: config, specs and trained networks/statistics (data only)."""
         if not self._built:
             raise RuntimeError("nothing to save: the agent has not been trained or loaded")
-        torch.save(
+        serialization.save(
             {
                 "name": self.name,
                 "config": config_lib.to_dict(self.config),
@@ -557,14 +586,16 @@ class Agent:
                 "modules": self._modules_state(),
             },
             path,
+            kind="agent",
         )
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> Agent:
-        """Loads an agent saved with `save`."""
+        """Loads an agent saved with `save`. The file is read as data only: a file that would run code
+        when unpickled is refused with `serialization.UnsafeFileError`."""
         from dm_env import specs
 
-        saved = torch.load(path, weights_only=False)
+        saved = serialization.load(path, kind="agent")
         agent = cls(config_lib.from_dict(AgentConfig, saved["config"]), saved["name"])
         obs_spec = {k: specs.Array(shape, np.dtype(dtype), name=k) for k, (shape, dtype) in saved["obs_spec"].items()}
         low, high = saved["action_bounds"]

@@ -22,8 +22,8 @@ import torch
 from torch import nn
 from torch.nn import functional as F
 
-from agents.config import RecurrentConfig, VAEConfig
-from agents.networks import mlp
+from hyperstate.agents.config import RecurrentConfig, VAEConfig
+from hyperstate.agents.networks import mlp
 
 
 @dataclasses.dataclass

@@ -14,9 +14,9 @@ import numpy as np
 import torch
 from torch import nn
 
-from agents.config import BonusConfig
-from agents.networks import mlp
-from agents.normalization import RunningMeanStd
+from hyperstate.agents.config import BonusConfig
+from hyperstate.agents.networks import mlp
+from hyperstate.agents.normalization import RunningMeanStd
 
 
 @dataclasses.dataclass
@@ -41,6 +41,9 @@ class Bonus(Protocol):
 
     def update(self, batch: BonusInput) -> dict[str, float]:
         """Trains on the rollout's inputs; returns logged losses."""
+
+    # Optional, for diagnostics (evaluation/diagnostics.py): `value(batch) -> (M,)`, the bonus a bonus of
+    # the hyper-state would pay at these inputs, learning nothing from them (no statistics updated).
 
     def state_dict(self) -> dict: ...
 
@@ -143,6 +146,12 @@ class EnsembleRND:
         self.input_stats.update(x.numpy())
         with torch.no_grad():
             return self.uncertainty(self.errors(self._normalized(x)), self.config.beta, self.config.aleatoric)
+
+    def value(self, batch: BonusInput) -> torch.Tensor:
+        """The bonus at these inputs under the current statistics, learning nothing from them."""
+        with torch.no_grad():
+            x = self._normalized(self.selector(batch))
+            return self.uncertainty(self.errors(x), self.config.beta, self.config.aleatoric)
 
     def update(self, batch: BonusInput) -> dict[str, float]:
         x = self.selector(batch).numpy().astype(np.float32)

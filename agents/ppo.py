@@ -15,8 +15,8 @@ import numpy as np
 import torch
 from torch import nn
 
-from agents.config import PPOConfig
-from agents.networks import Embed, mlp
+from hyperstate.agents.config import PPOConfig
+from hyperstate.agents.networks import Embed, mlp
 
 
 class ActorCritic(nn.Module):

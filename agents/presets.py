@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from agents.config import AgentConfig, BonusConfig, PPOConfig
+from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig
 
 STATE_BONUS = BonusConfig(input="state")  # state_keys="task": the task's position keys
 HYPERSTATE_BONUS = BonusConfig(input="hyperstate")

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
-import agents
+from hyperstate import agents
 
 _oracle_rh = agents.PRESETS["oracle_rh"]
 agents.PRESETS["oracle_rh_prior10"] = dataclasses.replace(

@@ -22,8 +22,8 @@ import mujoco.batch  # noqa: E402
 import numpy as np  # noqa: E402
 from dm_control.suite import cheetah  # noqa: E402
 
-import suite  # noqa: E402
-from suite.cheetah_dir import N_SUB_STEPS  # noqa: E402
+from hyperstate import suite  # noqa: E402
+from hyperstate.suite.cheetah_dir import N_SUB_STEPS  # noqa: E402
 
 
 def dm_control_env(steps: int) -> float:

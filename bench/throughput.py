@@ -20,7 +20,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 from suite_speed import raw_batch  # noqa: E402  (bench/ is on sys.path when run as a script)
 
-import agents  # noqa: E402
+from hyperstate import agents  # noqa: E402
 
 
 def main() -> None:

@@ -9,23 +9,27 @@ cell, what can be derived from what the cell saved:
   aggregate scores it recomputes equal the recorded ones;
 then rewrites `results.json`, `summary.csv` and the figures.
 
-    python -m evaluation.backfill OUT [--import MODULE ...]
+    python -m hyperstate.evaluation.backfill OUT [--import MODULE ...]
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import os
 from pathlib import Path
 
 import numpy as np
 
-import suite
-from agents import Agent
-from evaluation.cell import import_modules, load_records, write_json_atomic, write_results
-from evaluation.deploy import certainty_equivalent_metrics, evaluation_tasks, reads_true_task
-from evaluation.probe import belief_quality
-from evaluation.report import write_figures, write_summary
+# Nothing here renders: name no OpenGL backend and dm_control would try GLFW and warn about DISPLAY.
+os.environ.setdefault("MUJOCO_GL", "disable")
+
+from hyperstate import suite
+from hyperstate.agents import Agent
+from hyperstate.evaluation.cell import import_modules, load_records, write_json_atomic, write_results
+from hyperstate.evaluation.deploy import certainty_equivalent_metrics, evaluation_tasks, reads_true_task
+from hyperstate.evaluation.probe import belief_quality
+from hyperstate.evaluation.report import write_figures, write_summary
 
 
 def _certainty_equivalent(record: dict, directory: Path, grid: dict) -> bool:

@@ -1,9 +1,12 @@
 """One cell of the grid: train one agent on one task with one seed, evaluating as it goes.
 
-Everything a cell writes lives in `OUT/cells/<agent>__<task>__s<seed>/`: `record.json` (rewritten
-atomically after every evaluation point), the agent's training checkpoint, the final agent, and the
-final deployment's trajectories (`deployment.npz`). A cell whose record says `complete` is never re-run;
-an incomplete one resumes from its checkpoint.
+Everything a cell writes lives in `OUT/cells/<agent>__<task>__s<seed>/` (and its tensorboard scalars in
+`OUT/tb/<cell>/`): `record.json` (rewritten atomically after every evaluation point), the agent's
+training checkpoint, the agent at every evaluation point (`snapshots/`), the final agent, and the final
+deployment's trajectories (`deployment.npz`). A cell never writes the grid-level files: the driver
+(evaluation/run.py) alone writes `results.json`, `summary.csv` and the figures, so parallel cells never
+touch a shared file. A cell whose record says `complete` is never re-run; an incomplete one resumes from
+its checkpoint.
 """
 
 from __future__ import annotations
@@ -21,11 +24,10 @@ from typing import Any
 
 import numpy as np
 
-import agents
-import suite
-from agents import config as config_lib
-from evaluation.coverage import HyperStateCoverage
-from evaluation.deploy import (
+from hyperstate import agents, suite
+from hyperstate.agents import config as config_lib
+from hyperstate.evaluation.coverage import HyperStateCoverage
+from hyperstate.evaluation.deploy import (
     certainty_equivalent_metrics,
     deploy,
     deployment_metrics,
@@ -182,14 +184,21 @@ def run_cell(spec: CellSpec) -> dict:
     writer = SummaryWriter(log_dir=str(Path(spec.out) / "tb" / spec.cell_id))
     started = time.perf_counter() - (record["curve"][-1]["wall_seconds"] if record["curve"] else 0.0)
 
+    shares: dict[str, list[float]] = {}  # reward-stream shares of the iterations since the last point
+
     def evaluate(frames: int) -> dict:
         metrics = deployment_metrics(deploy(agent, spec.task, tasks, spec.episodes_per_task), spec.task)
+        sampled = deploy(agent, spec.task, tasks, spec.episodes_per_task, deterministic=False)
         point = {
             "frames": frames,
             "online_return": metrics["online_return"],
+            "online_return_stochastic": float(sampled.rewards.sum(0).mean()),
             "episode_returns": metrics["episode_returns"],
             "wall_seconds": time.perf_counter() - started,
         }
+        if shares:
+            point["reward_share"] = {k.removeprefix("reward_share/"): float(np.mean(v)) for k, v in shares.items()}
+            shares.clear()
         if coverage.visited.any():
             point["coverage"] = coverage.fraction()
             writer.add_scalar("eval/hyperstate_coverage", point["coverage"], frames)
@@ -201,6 +210,8 @@ def run_cell(spec: CellSpec) -> dict:
     def on_iteration(log: dict) -> None:
         frames = log["frames"]
         for key, value in log.items():
+            if key.startswith("reward_share/"):
+                shares.setdefault(key, []).append(value)
             if isinstance(value, float) and key not in ("wall_seconds",):
                 writer.add_scalar(key if "/" in key else f"train/{key}", value, frames)
         if log["iteration"] % every == 0 or log["iteration"] == iterations:
@@ -210,7 +221,6 @@ def run_cell(spec: CellSpec) -> dict:
             agent.save(directory / "snapshots" / f"agent_{frames:09d}.pt")
             np.save(coverage_path, coverage.visited)
             write_json_atomic(record_path, record)
-            write_results(Path(spec.out))
 
     agent.name = f"{spec.agent} seed {spec.seed}"
     agent.train(
@@ -225,6 +235,9 @@ def run_cell(spec: CellSpec) -> dict:
     )
     final = deploy(agent, spec.task, tasks, spec.episodes_per_task)
     record["final"] = deployment_metrics(final, spec.task, probe=True)
+    # The stochastic policy (sampled actions, fixed seed) next to the deterministic one.
+    sampled = deploy(agent, spec.task, tasks, spec.episodes_per_task, deterministic=False)
+    record["final"]["stochastic"] = deployment_metrics(sampled, spec.task)
     if reads_true_task(agent):
         # The reference also deployed Bayes-adaptively: an achievable lower bound on Bayes-optimal.
         record["final"]["certainty_equivalent"] = certainty_equivalent_metrics(
@@ -241,7 +254,6 @@ def run_cell(spec: CellSpec) -> dict:
     agent.save(directory / "agent.pt")
     record["complete"] = True
     write_json_atomic(record_path, record)
-    write_results(Path(spec.out))
     writer.close()
     return record
 

@@ -2,8 +2,9 @@
 
 Online return at deployment = mean over held-out tasks of the summed reward over the BAMDP horizon,
 starting from the prior belief (the agent's belief / hidden state is reset only at the BAMDP start),
-with deterministic actions. Also reported per inner MDP episode, plus the task's declared
-deployed-exploration metrics.
+with deterministic actions (the policy's mean). Also reported per inner MDP episode, plus the task's
+declared deployed-exploration metrics. `deploy(..., deterministic=False)` samples actions instead, from
+a fixed seed, for the stochastic policy's return next to the deterministic one.
 """
 
 from __future__ import annotations
@@ -12,8 +13,8 @@ import dataclasses
 
 import numpy as np
 
-import suite
-from evaluation.probe import belief_quality
+from hyperstate import suite
+from hyperstate.evaluation.probe import belief_quality
 
 # Held-out tasks and initial states come from their own seed, the same for every agent and run.
 EVAL_SEED = 987_654_321
@@ -88,9 +89,25 @@ def certainty_equivalent_metrics(
 
 
 def deploy(
-    agent, task: str, tasks: np.ndarray, episodes_per_task: int | None = None, seed: int = EVAL_SEED
+    agent,
+    task: str,
+    tasks: np.ndarray,
+    episodes_per_task: int | None = None,
+    seed: int = EVAL_SEED,
+    *,
+    deterministic: bool = True,
 ) -> Deployment:
-    """Deploys `agent` on each of `tasks` for one BAMDP episode (deterministic actions)."""
+    """Deploys `agent` on each of `tasks` for one BAMDP episode. Deterministic actions by default; with
+    `deterministic=False` actions are sampled, from torch's RNG seeded with `seed` inside a fork of it
+    (the caller's RNG state is untouched, so deploying never changes a training run)."""
+    import torch
+
+    with torch.random.fork_rng():
+        torch.manual_seed(seed)
+        return _deploy(agent, task, tasks, episodes_per_task, seed, deterministic)
+
+
+def _deploy(agent, task, tasks, episodes_per_task, seed, deterministic) -> Deployment:
     kwargs = {} if episodes_per_task is None else {"episodes_per_task": episodes_per_task}
     env = suite.batch(task, len(tasks), seed=seed, privileged=True, num_threads=1, **kwargs)
     env.set_tasks(tasks)
@@ -100,7 +117,7 @@ def deploy(
         inner.append(out.observation["inner_episode"][:, 0].copy())
         exact.append(out.observation.get("belief"))
         action, state = agent.act(
-            out.observation, state, deterministic=True, reward=None if state is None else out.reward
+            out.observation, state, deterministic=deterministic, reward=None if state is None else out.reward
         )
         features.append(agent.belief_features(state))
         out = env.step(action)

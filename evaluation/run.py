@@ -21,10 +21,19 @@ import sys
 import time
 from pathlib import Path
 
-import agents
-import suite
-from evaluation.cell import CellSpec, import_modules, load_records, run_cell, write_json_atomic, write_results
-from evaluation.report import REFERENCE_AGENT, text_table, write_figures, write_summary
+# Nothing here renders: name no OpenGL backend and dm_control would try GLFW and warn about DISPLAY.
+os.environ.setdefault("MUJOCO_GL", "disable")
+
+from hyperstate import agents, suite
+from hyperstate.evaluation.cell import (
+    CellSpec,
+    import_modules,
+    load_records,
+    run_cell,
+    write_json_atomic,
+    write_results,
+)
+from hyperstate.evaluation.report import REFERENCE_AGENT, text_table, write_figures, write_summary
 
 
 class UsageError(Exception):
@@ -97,6 +106,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=1,
         metavar="N",
         help="with --video: deployments per video, on the first N held-out tasks (default 1)",
+    )
+    p.add_argument(
+        "--no-diagnostics",
+        action="store_true",
+        help="skip the bonus-landscape figures (evaluation/diagnostics.py) drawn for agents with an RND bonus",
     )
     p.add_argument("--resume", action="store_true", help="continue a grid in OUT (completed cells are kept)")
     p.add_argument("--force", action="store_true", help="delete OUT's previous results first")
@@ -212,26 +226,53 @@ def prepare_out(args: argparse.Namespace, grid: dict) -> None:
     write_json_atomic(grid_file, grid)
 
 
-def run_local(specs: list[CellSpec], workers: int, progress: bool) -> None:
+# How often the driver folds the cells' records into OUT/results.json while a grid runs.
+RESULTS_EVERY_SECONDS = 30.0
+
+
+def _cell_failed(spec: CellSpec, error: BaseException) -> str:
+    line = f"{spec.cell_id}: {type(error).__name__}: {error}".splitlines()[0]
+    print(f"evaluation/run.py: cell failed (the others go on; --resume retries it): {line}", file=sys.stderr)
+    return line
+
+
+def run_local(specs: list[CellSpec], workers: int, progress: bool, out: Path) -> list[str]:
+    """Runs the cells; returns one line per failed cell (a failure never stops the other cells)."""
     from tqdm.auto import tqdm
 
+    failures = []
     overall = tqdm(total=len(specs), desc="grid", unit="cell", disable=not progress, position=0)
     if workers == 1:
         for spec in specs:
-            run_cell(spec)
+            try:
+                run_cell(spec)
+            except Exception as e:  # noqa: BLE001  (reported, and the grid goes on)
+                failures.append(_cell_failed(spec, e))
+            write_results(out)
             overall.update(1)
     else:
         import concurrent.futures
         import multiprocessing
 
         with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            for future in concurrent.futures.as_completed([pool.submit(run_cell, s) for s in specs]):
-                future.result()
-                overall.update(1)
+            pending = {pool.submit(run_cell, s): s for s in specs}
+            while pending:
+                done, _ = concurrent.futures.wait(
+                    pending, timeout=RESULTS_EVERY_SECONDS, return_when=concurrent.futures.FIRST_COMPLETED
+                )
+                write_results(out)  # the driver is the only writer of the grid-level files
+                for future in done:
+                    spec = pending.pop(future)
+                    try:
+                        future.result()
+                    except Exception as e:  # noqa: BLE001
+                        failures.append(_cell_failed(spec, e))
+                    overall.update(1)
     overall.close()
+    return failures
 
 
-def run_ray(specs: list[CellSpec], address: str | None, progress: bool) -> None:
+def run_ray(specs: list[CellSpec], address: str | None, progress: bool, out: Path) -> list[str]:
     try:
         import ray
     except ImportError:
@@ -240,13 +281,35 @@ def run_ray(specs: list[CellSpec], address: str | None, progress: bool) -> None:
 
     ray.init(address=address or os.environ.get("RAY_ADDRESS"), ignore_reinit_error=True, log_to_driver=False)
     remote = ray.remote(num_cpus=1)(run_cell)
-    pending = [remote.remote(s) for s in specs]
+    spec_of = {remote.remote(s): s for s in specs}
+    pending = list(spec_of)
+    failures = []
     overall = tqdm(total=len(specs), desc="grid (ray)", unit="cell", disable=not progress)
     while pending:
-        done, pending = ray.wait(pending, num_returns=1)
-        ray.get(done)
+        done, pending = ray.wait(pending, num_returns=1, timeout=RESULTS_EVERY_SECONDS)
+        write_results(out)
+        for ref in done:
+            try:
+                ray.get(ref)
+            except Exception as e:  # noqa: BLE001
+                failures.append(_cell_failed(spec_of[ref], e))
         overall.update(len(done))
     overall.close()
+    return failures
+
+
+def write_diagnostics(out: Path, records: list[dict]) -> None:
+    """The bonus landscape through training for every finished cell whose agent has an RND bonus."""
+    from hyperstate.evaluation.diagnostics import cell_diagnostics
+
+    for record in records:
+        if not record.get("complete") or not any(b["kind"] != "vae_error" for b in record["config"]["bonuses"]):
+            continue
+        cell = f"{record['agent']}__{record['task']}__s{record['seed']}"
+        try:
+            cell_diagnostics(out, cell)
+        except Exception as e:  # noqa: BLE001  (a figure must not cost the results)
+            print(f"evaluation/run.py: bonus landscape of {cell} failed: {type(e).__name__}: {e}", file=sys.stderr)
 
 
 def render_videos(args: argparse.Namespace) -> None:
@@ -254,7 +317,7 @@ def render_videos(args: argparse.Namespace) -> None:
     training ran without rendering."""
     gl = os.environ.get("MUJOCO_GL")
     env = {**os.environ, "MUJOCO_GL": gl if gl in ("egl", "osmesa", "glfw") else "egl"}
-    command = [sys.executable, "-m", "evaluation.video", str(args.out), "--tasks", str(args.video_tasks)]
+    command = [sys.executable, "-m", "hyperstate.evaluation.video", str(args.out), "--tasks", str(args.video_tasks)]
     if args.imports:
         command += ["--import", *args.imports]
     result = subprocess.run(command, env=env, cwd=Path(__file__).resolve().parents[1])
@@ -319,9 +382,9 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     try:
         if args.executor == "ray":
-            run_ray(specs, args.ray_address, not args.no_progress)
+            failures = run_ray(specs, args.ray_address, not args.no_progress, args.out)
         else:
-            run_local(specs, workers, not args.no_progress)
+            failures = run_local(specs, workers, not args.no_progress, args.out)
     except UsageError as e:
         print(f"evaluation/run.py: error: {e}", file=sys.stderr)
         return 2
@@ -329,11 +392,16 @@ def main(argv: list[str] | None = None) -> int:
     records = load_records(args.out)
     rows = write_summary(args.out, records)
     write_figures(args.out, records)
+    if not args.no_diagnostics:
+        write_diagnostics(args.out, records)
     if args.video:
         render_videos(args)
     print()
     print(text_table(rows))
     print(f"\n{len(records)} cells in {time.perf_counter() - started:.0f} s; results in {args.out}/")
+    if failures:
+        print(f"evaluation/run.py: {len(failures)} cell(s) failed:", *failures, sep="\n  ", file=sys.stderr)
+        return 1
     return 0
 
 

@@ -1,6 +1,6 @@
 """Videos of deployments: one MP4 per trained (agent, task) cell, with the task and belief overlaid.
 
-    MUJOCO_GL=egl python -m evaluation.video OUT [--cells AGENT__TASK__sSEED ...] [--tasks N]
+    MUJOCO_GL=egl python -m hyperstate.evaluation.video OUT [--cells AGENT__TASK__sSEED ...] [--tasks N]
                                                  [--width 320 --height 240]
 
 renders, for each cell of a finished `evaluation/run.py` results folder OUT (default: the first seed
@@ -25,10 +25,9 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw
 
-import agents
-import suite
-from evaluation.cell import import_modules
-from evaluation.deploy import EVAL_SEED, evaluation_tasks
+from hyperstate import agents, suite
+from hyperstate.evaluation.cell import import_modules
+from hyperstate.evaluation.deploy import EVAL_SEED, evaluation_tasks
 
 GEOM_TYPES = {
     "box": mujoco.mjtGeom.mjGEOM_BOX,

@@ -6,9 +6,31 @@
 Register your own meta-task from your own module with `@suite.register("name")`.
 """
 
-from suite import cheetah_dir, cheetah_vel, point_robot, quadruped_goal  # noqa: F401  (register the built-in tasks)
-from suite._batch import BatchEnv, BatchStep, LoopBatch
-from suite._registry import (
+import ctypes.util
+import os
+import sys
+
+
+def _default_gl_backend() -> None:
+    """dm_control reads MUJOCO_GL when first imported; unset, it tries GLFW first, which on a machine
+    without a display warns about DISPLAY before falling back. Where nothing was chosen and there is no
+    display, choose the headless backend it would fall back to (EGL, else OSMesa, else none)."""
+    if "MUJOCO_GL" in os.environ or "dm_control" in sys.modules or sys.platform != "linux":
+        return
+    if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"):
+        return
+    for backend, library in (("egl", "EGL"), ("osmesa", "OSMesa")):
+        if ctypes.util.find_library(library):
+            os.environ["MUJOCO_GL"] = backend
+            return
+    os.environ["MUJOCO_GL"] = "disable"
+
+
+_default_gl_backend()
+
+from hyperstate.suite import cheetah_dir, cheetah_vel, point_robot, quadruped_goal  # noqa: F401  (register the built-in tasks)
+from hyperstate.suite._batch import BatchEnv, BatchStep, LoopBatch
+from hyperstate.suite._registry import (
     TASKS,
     batch,
     exploration_metrics,
@@ -20,8 +42,8 @@ from suite._registry import (
     task_prior,
     unregister,
 )
-from suite._seeding import as_generator, spawn_seeds
-from suite.base import MetaTask, TaskPrior
+from hyperstate.suite._seeding import as_generator, spawn_seeds
+from hyperstate.suite.base import MetaTask, TaskPrior
 
 __all__ = [
     "TASKS",

@@ -70,6 +70,41 @@ def check_batch_action(action: np.ndarray, num_envs: int, spec: specs.BoundedArr
     return action
 
 
+def _is_plain(value: object) -> bool:
+    if value is None or isinstance(value, (bool, int, float, str, np.generic)):
+        return True
+    if isinstance(value, np.ndarray):
+        return not value.dtype.hasobject
+    if isinstance(value, (list, tuple)):
+        return all(_is_plain(v) for v in value)
+    if isinstance(value, dict):
+        return all(isinstance(k, str) and _is_plain(v) for k, v in value.items())
+    return False
+
+
+def _task_state(task: object) -> dict:
+    """A task's mutable state as plain data: random generators by state, plain attributes by value."""
+    state = {}
+    for name, value in vars(task).items():
+        if isinstance(value, np.random.RandomState):
+            state[name] = ("random_state", value.get_state(legacy=False))
+        elif isinstance(value, np.random.Generator):
+            state[name] = ("generator", value.bit_generator.state)
+        elif _is_plain(value):
+            state[name] = ("value", copy.deepcopy(value))
+    return state
+
+
+def _load_task_state(task: object, state: dict) -> None:
+    for name, (kind, value) in state.items():
+        if kind == "random_state":
+            getattr(task, name).set_state(value)
+        elif kind == "generator":
+            getattr(task, name).bit_generator.state = value
+        else:
+            setattr(task, name, copy.deepcopy(value))
+
+
 def stack(observations: Sequence[dict[str, np.ndarray]]) -> dict[str, np.ndarray]:
     return {k: np.stack([np.asarray(o[k]) for o in observations]) for k in observations[0]}
 
@@ -117,7 +152,12 @@ class LoopBatch:
             env.task.force_task(None if tasks is None else tasks[i])
 
     def state_dict(self) -> dict:
-        """Snapshot of every environment: full MuJoCo integration state, task attributes, step counters."""
+        """Snapshot of every environment: full MuJoCo integration state, the task's state, step counters.
+
+        A snapshot holds data only (arrays, numbers, strings, random-generator states), so it can be
+        saved without pickling objects. Of the task's attributes it keeps random generators (by their
+        state) and attributes of plain types; anything else (a prior, a spec) is taken to be fixed once
+        the task is constructed."""
         snapshot = []
         for env in self._envs:
             physics = env.physics
@@ -127,7 +167,7 @@ class LoopBatch:
             snapshot.append(
                 {
                     "physics": state,
-                    "task": copy.deepcopy(env.task.__dict__),
+                    "task": _task_state(env.task),
                     "counters": (env._step_count, env._reset_next_step),
                 }
             )
@@ -140,7 +180,7 @@ class LoopBatch:
                 physics.model.ptr, physics.data.ptr, saved["physics"], mujoco.mjtState.mjSTATE_INTEGRATION
             )
             mujoco.mj_forward(physics.model.ptr, physics.data.ptr)
-            env.task.__dict__.update(copy.deepcopy(saved["task"]))
+            _load_task_state(env.task, saved["task"])
             env._step_count, env._reset_next_step = saved["counters"]
 
     def close(self) -> None:

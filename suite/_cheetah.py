@@ -18,9 +18,9 @@ import numpy as np
 from dm_control.rl import control
 from dm_control.suite import cheetah
 
-from suite._mujoco_batch import MujocoBatch
-from suite._seeding import SeedLike, spawn_seeds
-from suite.base import Marker, MetaTask, TaskPrior, check_action
+from hyperstate.suite._mujoco_batch import MujocoBatch
+from hyperstate.suite._seeding import SeedLike, spawn_seeds
+from hyperstate.suite.base import Marker, MetaTask, TaskPrior, check_action
 
 # dm_control's cheetah.xml uses a compiler attribute MuJoCo 3.17 deprecates; the warning fires on every
 # load and says nothing actionable to users of this suite.

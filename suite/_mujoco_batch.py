@@ -16,8 +16,8 @@ import mujoco.batch
 import numpy as np
 from dm_env import specs
 
-from suite._batch import BatchStep, check_batch_action
-from suite.base import MetaTask
+from hyperstate.suite._batch import BatchStep, check_batch_action
+from hyperstate.suite.base import MetaTask
 
 
 class MujocoBatch:

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
-from suite._batch import BatchEnv, LoopBatch
-from suite._seeding import SeedLike, spawn_seeds
+from hyperstate.suite._batch import BatchEnv, LoopBatch
+from hyperstate.suite._seeding import SeedLike, spawn_seeds
 
 Factory = Callable[..., Any]
 

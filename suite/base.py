@@ -16,7 +16,7 @@ import numpy as np
 from dm_control.suite import base
 from dm_env import specs
 
-from suite._seeding import SeedLike, as_generator
+from hyperstate.suite._seeding import SeedLike, as_generator
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,7 +15,7 @@ import functools
 import numpy as np
 from dm_control.rl import control
 
-from suite._cheetah import (  # noqa: F401  (constants re-exported: the cheetah-direction task's numbers)
+from hyperstate.suite._cheetah import (  # noqa: F401  (constants re-exported: the cheetah-direction task's numbers)
     CONTROL_TIMESTEP,
     CTRL_COST_WEIGHT,
     EPISODE_LENGTH,
@@ -28,8 +28,8 @@ from suite._cheetah import (  # noqa: F401  (constants re-exported: the cheetah-
     Physics,
     environment,
 )
-from suite._registry import register
-from suite._seeding import SeedLike
+from hyperstate.suite._registry import register
+from hyperstate.suite._seeding import SeedLike
 
 BACKWARD, FORWARD = -1.0, 1.0
 
@@ -122,26 +122,43 @@ def zone_exploration_metrics(
     zone_radius: float = ZONE_RADIUS,
     **_: object,
 ) -> dict[str, np.ndarray]:
-    """Deployed-exploration metrics of M deployments, one value per deployment.
+    """Deployed-exploration metrics of M deployments, one value per deployment (NaN: does not apply).
 
-    `observations` are the observations each step ended in ((T, M, ...) arrays), `tasks` the true
-    directions (M, 1). Per deployment: `left_zone` (ever |x - x0| >= zone), `first_exit_step` (1-based
-    BAMDP step of the first exit, NaN if never), `correct_direction` (left, and the last MDP episode
-    ends beyond the zone on the rewarded side), `stuck` (left, and the last MDP episode ends back inside
-    the zone: the paper's Figure 3 failure), `distance_correct` (direction * final x-displacement).
+    `observations` are the observations each step ended in ((T, M, ...) arrays), `rewards` (T, M), `tasks`
+    the true directions (M, 1). Per deployment:
+    - `left_zone`: ever |x - x0| >= zone; `first_exit_step`: 1-based BAMDP step of the first exit (NaN if
+      never);
+    - `correct_direction`: left, and the last MDP episode ends beyond the zone on the rewarded side;
+      `stuck`: left, and the last MDP episode ends back inside the zone (the paper's Figure 3 failure);
+    - `distance_correct`: direction * final x-displacement;
+    - `wrong_first_exit`: the first exit was on the unrewarded side (NaN if it never left);
+    - `turned_around`: of the deployments whose first exit was wrong, whether the last MDP episode ends
+      beyond the zone on the rewarded side (NaN for the others): the Bayes-optimal turn;
+    - `return_forward`, `return_backward`: the deployment's return, on forward / backward tasks only;
+    - `return_wrong_first`: the return of deployments whose first exit was wrong (does the turn pay?).
     """
     x = observations["x_displacement"][..., 0]
     direction = np.asarray(tasks)[:, 0]
+    returns = np.asarray(rewards).sum(axis=0)
     outside = np.abs(x) >= zone_radius
     left = outside.any(axis=0)
-    first = np.where(left, outside.argmax(axis=0) + 1.0, np.nan)
+    first_index = outside.argmax(axis=0)
+    first = np.where(left, first_index + 1.0, np.nan)
+    exit_side = np.sign(x[first_index, np.arange(x.shape[1])])
+    wrong_first = left & (exit_side != np.sign(direction))
     final = x[-1]
+    correct = left & (direction * final >= zone_radius)
     return {
         "left_zone": left.astype(float),
         "first_exit_step": first,
-        "correct_direction": (left & (direction * final >= zone_radius)).astype(float),
+        "correct_direction": correct.astype(float),
         "stuck": (left & (np.abs(final) < zone_radius)).astype(float),
         "distance_correct": direction * final,
+        "wrong_first_exit": np.where(left, wrong_first.astype(float), np.nan),
+        "turned_around": np.where(wrong_first, correct.astype(float), np.nan),
+        "return_forward": np.where(direction > 0, returns, np.nan),
+        "return_backward": np.where(direction < 0, returns, np.nan),
+        "return_wrong_first": np.where(wrong_first, returns, np.nan),
     }
 
 

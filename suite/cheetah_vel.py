@@ -14,9 +14,16 @@ from __future__ import annotations
 import numpy as np
 from dm_control.rl import control
 
-from suite._cheetah import CTRL_COST_WEIGHT, EPISODE_LENGTH, ZONE_RADIUS, CheetahZoneBatch, CheetahZoneTask, environment
-from suite._registry import register
-from suite._seeding import SeedLike
+from hyperstate.suite._cheetah import (
+    CTRL_COST_WEIGHT,
+    EPISODE_LENGTH,
+    ZONE_RADIUS,
+    CheetahZoneBatch,
+    CheetahZoneTask,
+    environment,
+)
+from hyperstate.suite._registry import register
+from hyperstate.suite._seeding import SeedLike
 
 MIN_VELOCITY, MAX_VELOCITY = 0.0, 3.0  # m/s
 VELOCITY_TOLERANCE = 1.0  # m/s: the velocity reward falls linearly from 1 at v* to 0 at this error

@@ -1,6 +1,6 @@
 """Demo: roll out scripted gaits on cheetah_dir_sparse and print returns and beliefs.
 
-    python -m suite.demo [--seed 0] [--episodes-per-task 2]
+    python -m hyperstate.suite.demo [--seed 0] [--episodes-per-task 2]
 
 For each true direction it runs the gait that goes the right way and the one that goes the wrong
 way, through the dm_control environment, and prints the BAMDP return, the step at which the torso
@@ -13,9 +13,9 @@ import argparse
 
 import numpy as np
 
-import suite
-from suite.cheetah_dir import BACKWARD, FORWARD
-from suite.scripted import gait
+from hyperstate import suite
+from hyperstate.suite.cheetah_dir import BACKWARD, FORWARD
+from hyperstate.suite.scripted import gait
 
 
 def rollout(direction: float, gait_direction: float, seed: int, episodes_per_task: int) -> dict:

@@ -1,13 +1,17 @@
 """Gymnasium adapter: any registered task as a `gymnasium.Env` with a flat Box observation.
 
-    import suite.gym
-    env = suite.gym.make("cheetah_dir_sparse", episodes_per_task=2)
-    env = gymnasium.make("hyperstate/cheetah_dir_sparse")      # the same, through Gymnasium's registry
+    from hyperstate.suite import gym as suite_gym
+    env = suite_gym.make("cheetah_dir_sparse", episodes_per_task=2)
+    # The same through Gymnasium's registry, from a fresh interpreter ("module:env_id" imports the module,
+    # which registers every suite task as hyperstate/<name>):
+    env = gymnasium.make("hyperstate.suite.gym:hyperstate/cheetah_dir_sparse", episodes_per_task=2)
 
 The observation concatenates the task's non-privileged observation keys (in spec order) as float32.
 One Gymnasium episode is one BAMDP episode; its end is a truncation (the horizon), never a
 termination. `info` carries the privileged `belief` and `task`, for analysis — not for the policy.
-`reset(seed=s)` reseeds the task's generator, so the same seed gives the same task and initial state.
+`reset(seed=s)` rebuilds the environment through the task's registered factory with seed `s`, so the
+same seed gives the same task, initial state and every later draw, for any registered task (including a
+user's dm_control task seeded the dm_control way, `random=seed`).
 """
 
 from __future__ import annotations
@@ -18,8 +22,7 @@ import gymnasium
 import numpy as np
 from gymnasium import spaces
 
-import suite
-from suite._seeding import as_generator
+from hyperstate import suite
 
 PRIVILEGED_KEYS = ("belief", "task")
 
@@ -30,6 +33,7 @@ class MetaTaskEnv(gymnasium.Env):
     metadata = {"render_modes": ["rgb_array"], "render_fps": 20}
 
     def __init__(self, name: str, render_mode: str | None = None, **kwargs: Any):
+        self._kwargs = kwargs
         self._env = suite.load(name, seed=None, privileged=True, **kwargs)
         self.name = name
         self.render_mode = render_mode
@@ -50,7 +54,10 @@ class MetaTaskEnv(gymnasium.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         if seed is not None:
-            self._env.task._rng = as_generator(seed)
+            # A task's randomness lives where its factory put it (suite tasks: a NumPy Generator; dm_control
+            # tasks: `random=`): building the environment anew with the seed reseeds all of it.
+            self._env.close()
+            self._env = suite.load(self.name, seed=seed, privileged=True, **self._kwargs)
         step = self._env.reset()
         return self._flat(step.observation), self._info(step.observation)
 

@@ -25,10 +25,10 @@ from dm_control.mujoco import Physics as MjPhysics
 from dm_control.rl import control
 from dm_control.suite import base as suite_base
 
-from suite._mujoco_batch import MujocoBatch
-from suite._registry import register
-from suite._seeding import SeedLike, spawn_seeds
-from suite.base import Marker, MetaTask, check_action
+from hyperstate.suite._mujoco_batch import MujocoBatch
+from hyperstate.suite._registry import register
+from hyperstate.suite._seeding import SeedLike, spawn_seeds
+from hyperstate.suite.base import Marker, MetaTask, check_action
 
 PHYSICS_TIMESTEP = 0.01
 N_SUB_STEPS = 5

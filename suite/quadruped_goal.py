@@ -19,9 +19,9 @@ import numpy as np
 from dm_control.rl import control
 from dm_control.suite import quadruped
 
-from suite._registry import register
-from suite._seeding import SeedLike
-from suite.base import Marker, MetaTask, check_action
+from hyperstate.suite._registry import register
+from hyperstate.suite._seeding import SeedLike
+from hyperstate.suite.base import Marker, MetaTask, check_action
 
 CONTROL_TIMESTEP = 0.02  # dm_control's quadruped
 EPISODE_LENGTH = 500  # control steps per MDP episode (10 s)

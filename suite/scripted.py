@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from suite.cheetah_dir import BACKWARD, CONTROL_TIMESTEP, FORWARD
+from hyperstate.suite.cheetah_dir import BACKWARD, CONTROL_TIMESTEP, FORWARD
 
 
 class SinusoidGait:

@@ -6,12 +6,12 @@ import numpy as np
 import pytest
 import torch
 
-import agents
-from agents.beliefs import RecurrentBelief, Trajectories, Transition, VariBADBelief, gaussian_kl
-from agents.bonuses import BonusInput, EnsembleRND, InputSelector
-from agents.config import BonusConfig, RecurrentConfig, VAEConfig, apply_overrides
-from agents.normalization import ReturnScaler, RunningMeanStd
-from agents.ppo import compute_gae
+from hyperstate import agents
+from hyperstate.agents.beliefs import RecurrentBelief, Trajectories, Transition, VariBADBelief, gaussian_kl
+from hyperstate.agents.bonuses import BonusInput, EnsembleRND, InputSelector
+from hyperstate.agents.config import BonusConfig, RecurrentConfig, VAEConfig, apply_overrides
+from hyperstate.agents.normalization import ReturnScaler, RunningMeanStd
+from hyperstate.agents.ppo import compute_gae
 
 
 # Normalisation -------------------------------------------------------------------------------------
@@ -208,7 +208,7 @@ def test_presets_cover_figure_2():
 
 # Reward combination, eq. (4) ------------------------------------------------------------------------
 def test_combine_rewards_normalises_each_stream_weights_and_anneals():
-    from agents.agent import combine_rewards
+    from hyperstate.agents.agent import combine_rewards
 
     rng = np.random.default_rng(0)
     extrinsic, b1, b2 = rng.normal(0, 30, (5, 3)), rng.random((5, 3)), 100 * rng.random((5, 3))
@@ -242,7 +242,7 @@ def test_combine_rewards_normalises_each_stream_weights_and_anneals():
 
 
 def test_vae_error_bonus_is_the_reward_decoders_squared_error():
-    from agents.bonuses import VAEErrorBonus
+    from hyperstate.agents.bonuses import VAEErrorBonus
 
     torch.manual_seed(0)
     gen = torch.Generator().manual_seed(7)

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 from dm_env import test_utils
 
-import suite
-from suite.cheetah_vel import CheetahVelocity
-from suite.point_robot import HalfCircleGoalPrior, goal_metrics
-from suite.scripted import gait
+from hyperstate import suite
+from hyperstate.suite.cheetah_vel import CheetahVelocity
+from hyperstate.suite.point_robot import HalfCircleGoalPrior, goal_metrics
+from hyperstate.suite.scripted import gait
 
 NEW_TASKS = {
     # name: small kwargs for fast tests (short MDP episodes, two of them so inner resets are exercised)
@@ -339,8 +339,8 @@ def test_quadruped_goal_prior_on_circle_and_random_headings():
 def test_task_aware_ppo_learns_to_reach_the_dense_point_robot_goal():
     """100k frames (~30 s): from standing at the origin (return ≈ −100: distance 1 for 100 steps) to
     moving onto the goal. Measured: −17 to −37 per held-out goal (seed 0)."""
-    import agents
-    from evaluation.deploy import deploy, evaluation_tasks
+    from hyperstate import agents
+    from hyperstate.evaluation.deploy import deploy, evaluation_tasks
 
     goals = evaluation_tasks("point_robot", 8)
     settings = {"ppo.num_envs": 16, "ppo.rollout_length": 100}

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from dm_env import test_utils
 
-import suite
-from suite.cheetah_dir import BACKWARD, FORWARD
-from suite.scripted import gait
+from hyperstate import suite
+from hyperstate.suite.cheetah_dir import BACKWARD, FORWARD
+from hyperstate.suite.scripted import gait
 
 ZONE, COST_W, DT = 5.0, 0.05, 0.05
 
@@ -18,10 +18,27 @@ def rootx(env) -> float:
     return float(env.physics.named.data.qpos["rootx"][0])
 
 
+def control_cost(action) -> float:
+    """An independent formula for the task's control cost. The task sums squares (np.sum(np.square(a)));
+    a dot product rounds differently on some CPUs (1 ulp), so compare the two to a relative 1e-12."""
+    a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
+    return COST_W * float(a @ a)
+
+
+def test_control_cost_formulas_agree_to_rounding_only():
+    """Why reward tests compare to a tolerance: the task's sum of squares and a dot product are the same
+    number up to rounding, and which way they round depends on the CPU's NumPy kernels (on AVX-512 they
+    differ by an ulp in about a quarter of random 6-vectors). Both stay within a relative 1e-12."""
+    actions = np.random.default_rng(0).uniform(-1.0, 1.0, (10_000, 6))
+    summed = np.array([np.sum(np.square(a)) for a in actions])
+    dotted = np.array([a @ a for a in actions])
+    np.testing.assert_allclose(summed, dotted, rtol=1e-12, atol=0.0)
+    assert np.max(np.abs(summed - dotted) / np.spacing(dotted)) <= 4  # a few ulps, never more
+
+
 def expected_reward(direction, x_before, x_after, x_start, action, zone=ZONE):
     """Independent recomputation of the reward from physics quantities."""
-    a = np.clip(np.asarray(action, dtype=float), -1.0, 1.0)
-    cost = COST_W * float(a @ a)
+    cost = control_cost(action)
     velocity = (x_after - x_before) / DT
     return (direction * velocity if abs(x_after - x_start) >= zone else 0.0) - cost
 
@@ -109,9 +126,8 @@ def test_reward_recomputed_from_physics_along_scripted_run(direction):
         assert step.reward == pytest.approx(want, rel=1e-12, abs=1e-12)
         assert step.observation["x_displacement"][0] == pytest.approx(x_after - x_start, abs=1e-12)
         inside = abs(x_after - x_start) < ZONE
-        if inside:
-            a = np.clip(action, -1, 1)
-            assert step.reward == -COST_W * float(a @ a)  # exactly the control cost, no velocity term
+        if inside:  # the control cost alone, no velocity term
+            assert step.reward == pytest.approx(-control_cost(action), rel=1e-12, abs=0.0)
         elif crossed_at is None:
             crossed_at = t
     assert crossed_at is not None, "scripted gait should leave the zone"
@@ -123,23 +139,26 @@ def test_forward_run_earns_velocity_reward_only_after_crossing():
     policy = gait(FORWARD)
     env.reset()
     x_start = rootx(env)
-    velocity_terms, displacement = [], []
+    rewards, costs, displacement = [], [], []
     for t in range(200):
         action = policy(t)
         step = env.step(action)
-        velocity_terms.append(step.reward + COST_W * float(action @ action))
+        rewards.append(step.reward)
+        costs.append(control_cost(action))
         displacement.append(rootx(env) - x_start)
-    velocity_terms, displacement = np.array(velocity_terms), np.array(displacement)
+    rewards, costs, displacement = np.array(rewards), np.array(costs), np.array(displacement)
+    velocity_terms = rewards + costs
     inside = np.abs(displacement) < ZONE
     assert inside[:20].all() and not inside.all()
-    assert np.all(velocity_terms[inside] == 0.0)
+    # Inside the zone the reward is the control cost alone (to rounding: the formulas differ).
+    np.testing.assert_allclose(rewards[inside], -costs[inside], rtol=1e-12, atol=0.0)
     assert np.all(displacement[~inside] >= ZONE)  # left forward, never came back
     assert velocity_terms[~inside].sum() > 100.0  # running forward after crossing pays
     # The same run on a backward task is punished after the crossing instead.
     env = suite.load("cheetah_dir_sparse", seed=1, direction=BACKWARD)
     env.reset()
     rewards = np.array([env.step(policy(t)).reward for t in range(200)])
-    cost = np.array([COST_W * float(policy(t) @ policy(t)) for t in range(200)])
+    cost = np.array([control_cost(policy(t)) for t in range(200)])
     np.testing.assert_allclose(rewards[~inside] + cost[~inside], -velocity_terms[~inside], rtol=1e-12)
 
 
@@ -369,6 +388,30 @@ def test_zone_exploration_metrics_on_known_trajectories():
     # The dense task has no zone: every deployment "leaves" it on its first step.
     dense = suite.exploration_metrics("cheetah_dir")({"x_displacement": x}, np.zeros((4, 4)), tasks)
     np.testing.assert_array_equal(dense["first_exit_step"], [1, 1, 1, 1])
+
+
+def test_turn_around_metrics_on_known_trajectories():
+    metrics = suite.exploration_metrics("cheetah_dir_sparse")
+    x = np.array(
+        [
+            [0.5, 1.0, -2.0, 1.0, 3.0],
+            [0.5, 6.0, -6.0, 6.0, 6.0],
+            [0.5, 8.0, -3.0, 9.0, -3.0],
+            [0.5, 9.0, -1.0, 12.0, -7.0],
+        ]
+    )[..., None]
+    # Forward tasks: stays; exits forward; exits backward and comes back. Backward tasks: exits forward and
+    # keeps going; exits forward, turns around and ends beyond the backward border.
+    tasks = np.array([[FORWARD], [FORWARD], [FORWARD], [BACKWARD], [BACKWARD]])
+    rewards = np.tile(np.arange(1.0, 6.0), (4, 1))  # returns 4, 8, 12, 16, 20
+    m = metrics({"x_displacement": x}, rewards, tasks)
+    nan = np.nan
+    np.testing.assert_array_equal(m["wrong_first_exit"], [nan, 0, 1, 1, 1])
+    np.testing.assert_array_equal(m["turned_around"], [nan, nan, 0, 0, 1])
+    np.testing.assert_array_equal(m["correct_direction"], [0, 1, 0, 0, 1])
+    np.testing.assert_array_equal(m["return_forward"], [4, 8, 12, nan, nan])
+    np.testing.assert_array_equal(m["return_backward"], [nan, nan, nan, 16, 20])
+    np.testing.assert_array_equal(m["return_wrong_first"], [nan, nan, 12, 16, 20])
 
 
 def test_loop_batch_snapshot_restores_exactly():

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-import suite
+from hyperstate import suite
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -29,7 +29,7 @@ def test_new_task_example_registers_trains_and_benchmarks(tmp_path):
     args[seeds + 1 : seeds + 4] = ["0"]
     config = tmp_path / "tiny.toml"
     config.write_text('[all]\n"ppo.num_envs" = 4\n"ppo.rollout_length" = 50\n"vae.batch_trajectories" = 2\n')
-    from evaluation.run import main
+    from hyperstate.evaluation.run import main
 
     try:
         # Two workers: cells run in spawned processes, which must import the user's file themselves.

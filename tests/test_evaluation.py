@@ -1,6 +1,7 @@
 """evaluation/run.py: the results contract, metrics, errors, crash + resume, Ray."""
 
 import csv
+import dataclasses
 import json
 import os
 import signal
@@ -12,12 +13,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import agents
-import suite
-from evaluation.deploy import deploy, deployment_metrics, evaluation_tasks
-from evaluation.stats import bootstrap_ci, iqm
-from suite.cheetah_dir import BACKWARD, FORWARD
-from suite.scripted import gait
+from hyperstate import agents, suite
+from hyperstate.evaluation.deploy import deploy, deployment_metrics, evaluation_tasks
+from hyperstate.evaluation.stats import bootstrap_ci, iqm
+from hyperstate.suite.cheetah_dir import BACKWARD, FORWARD
+from hyperstate.suite.scripted import gait
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN = [sys.executable, str(ROOT / "evaluation" / "run.py")]
@@ -107,7 +107,14 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
     for r in records:
         assert set(r) >= {"agent", "task", "seed", "frames", "config", "curve", "final", "versions"}
         assert [p["frames"] for p in r["curve"]] == [200, 400]
-        assert set(r["curve"][0]) == {"frames", "online_return", "episode_returns", "wall_seconds", "coverage"}
+        assert set(r["curve"][0]) == {
+            "frames",
+            "online_return",
+            "online_return_stochastic",
+            "episode_returns",
+            "wall_seconds",
+            "coverage",
+        }
         assert r["config"]["ppo"]["num_envs"] == 4 and r["config"]["belief"] in ("oracle", "varibad", "task_aware")
         final = r["final"]
         assert final["online_return"] == pytest.approx(np.mean(final["online_return_per_task"]))
@@ -154,7 +161,11 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
     path.write_text(json.dumps(record))
     varibad_path.write_text(json.dumps(varibad))
     proc = subprocess.run(
-        [sys.executable, "-m", "evaluation.backfill", str(out)], capture_output=True, text=True, cwd=ROOT, timeout=300
+        [sys.executable, "-m", "hyperstate.evaluation.backfill", str(out)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=300,
     )
     assert proc.returncode == 0, proc.stderr
     assert "2 cells updated" in proc.stdout
@@ -258,7 +269,7 @@ def test_ray_executor_runs_a_tiny_grid(tmp_path, tiny_config):
 
 # Beyond the paper: coverage, belief probe, Bayes-optimal estimate -----------------------------------
 def test_hyperstate_coverage_known_cases():
-    from evaluation.coverage import HyperStateCoverage
+    from hyperstate.evaluation.coverage import HyperStateCoverage
 
     still = HyperStateCoverage()
     still.update({"x_displacement": np.full((200, 4, 1), 0.3), "belief": np.full((200, 4, 2), 0.5)})
@@ -282,7 +293,7 @@ def _exact_beliefs(t_len=60, m=20, seed=0):
 
 
 def test_belief_probe_is_perfect_on_the_exact_belief_and_blind_without_features():
-    from evaluation.probe import belief_quality
+    from hyperstate.evaluation.probe import belief_quality
 
     exact = _exact_beliefs()
     perfect = belief_quality(exact + 1e-3 * np.random.default_rng(1).normal(size=exact.shape), exact)
@@ -301,7 +312,7 @@ def test_belief_probe_is_perfect_on_the_exact_belief_and_blind_without_features(
 
 
 def test_bayes_optimal_estimate_by_hand():
-    from suite.cheetah_dir import bayes_optimal_estimate
+    from hyperstate.suite.cheetah_dir import bayes_optimal_estimate
 
     got = bayes_optimal_estimate(np.array([300.0, 50.0, -10.0]), zone_radius=5.0)
     assert got == pytest.approx(((300 - 100) + (50 - 25) + (-10)) / 3)  # detour 2 * 5 m / 0.05 s = 200
@@ -326,7 +337,7 @@ class _GaitFollower:
 
 
 def test_certainty_equivalent_shows_the_belief_mode_and_pays_the_wrong_guess():
-    from evaluation.deploy import CertaintyEquivalent
+    from hyperstate.evaluation.deploy import CertaintyEquivalent
 
     follower = _GaitFollower()
     support = suite.task_prior("cheetah_dir_sparse").support()  # rows [backward], [forward]
@@ -347,13 +358,17 @@ def test_certainty_equivalent_shows_the_belief_mode_and_pays_the_wrong_guess():
 
 def test_figure_2_config_is_valid():
     """bench/reproduce_fig2.sh's config maps onto the presets (a typo would only show hours later)."""
-    from evaluation.run import build_grid, parse_args
+    from hyperstate.evaluation.run import build_grid, parse_args
 
     script = (ROOT / "bench" / "reproduce_fig2.sh").read_text()
     agents_line = next(line for line in script.splitlines() if "--agents" in line)
     presets = agents_line.split("--agents")[1].split("\\")[0].split()
+    import_line = next(line for line in script.splitlines() if "--import" in line)
+    (extra_presets,) = import_line.split("--import")[1].split("\\")[0].split()
     args = parse_args(
         [
+            "--import",
+            str(ROOT / extra_presets),
             "--agents",
             *presets,
             "--tasks",
@@ -366,8 +381,18 @@ def test_figure_2_config_is_valid():
             str(ROOT / "bench" / "fig2.toml"),
         ]
     )
-    names, overrides = build_grid(args)
-    assert set(presets) == {"oracle", "oracle_rs", "oracle_rh", "varibad", "varibad_rh", "hyperx"}
+    try:
+        names, overrides = build_grid(args)
+        # The extra row is the committed preset with only its prior scale changed.
+        extra = agents.make("oracle_rh_prior10", **overrides["oracle_rh_prior10"]).config
+        committed = agents.make("oracle_rh", **overrides["oracle_rh"]).config
+        assert extra.bonuses[0].prior_scale == 10.0 and committed.bonuses[0].prior_scale == 5.0
+        assert dataclasses.replace(extra, bonuses=committed.bonuses) == committed
+    finally:
+        agents.PRESETS.pop("oracle_rh_prior10", None)
+        sys.modules.pop("fig2_presets", None)
+    assert set(presets) == {"oracle", "oracle_rs", "oracle_rh", "oracle_rh_prior10", "varibad", "varibad_rh", "hyperx"}
     assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 4
+    assert overrides["oracle_rh_prior10"]["bonuses.0.updates_per_iteration"] == 4
     assert all(o["ppo.entropy_coef"] == 0.01 for o in overrides.values())
     assert all(o["physics_threads"] == 1 for o in overrides.values())

@@ -7,8 +7,8 @@ import pytest
 from dm_control import mujoco
 from dm_control.rl import control
 
-import suite
-from suite.base import MetaTask, check_action
+from hyperstate import suite
+from hyperstate.suite.base import MetaTask, check_action
 
 SLIDER_XML = """
 <mujoco>

@@ -10,8 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import agents
-import suite
+from hyperstate import agents, suite
 
 ROOT = Path(__file__).resolve().parents[1]
 TINY = {"ppo.num_envs": 4, "ppo.rollout_length": 50, "vae.batch_trajectories": 2, "vae.subsample_elbos": 10}
