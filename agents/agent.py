@@ -14,7 +14,7 @@ import dataclasses
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -27,7 +27,7 @@ from hyperstate.agents import config as config_lib
 from hyperstate.agents import serialization
 from hyperstate.agents.beliefs import Trajectories, Transition, make_belief
 from hyperstate.agents.bonuses import BonusInput, make_bonus
-from hyperstate.agents.config import AgentConfig
+from hyperstate.agents.config import AgentConfig, BonusConfig
 from hyperstate.agents.normalization import ReturnScaler, RunningMeanStd
 from hyperstate.agents.ppo import ActorCritic, compute_gae, gaussian_log_prob, ppo_update
 
@@ -47,25 +47,37 @@ def combine_rewards(
     bonuses: list[np.ndarray],
     *,
     weights: list[float],
-    anneal: float,
+    anneal: float | Sequence[float],
     lasts: np.ndarray,
     ext_scaler: ReturnScaler | None,
     bonus_scalers: list[ReturnScaler],
     reward_clip: float,
+    bonus_clips: Sequence[float | None] | None = None,
 ) -> tuple[np.ndarray, list[np.ndarray]]:
     """Eq. (4): r + Σ_i λ_i r_i, each stream divided by the std of its own running discounted return.
 
     The extrinsic stream is normalised and clipped to ±`reward_clip` (unless `ext_scaler` is None);
-    the bonuses are normalised, weighted and multiplied by `anneal` (1 − progress when annealing).
-    Returns the combined (T, N) reward and the normalised bonuses.
+    each bonus is normalised, clipped to ±`bonus_clips[i]` where one is given, weighted, and multiplied by
+    its annealing factor (`anneal`: one for all bonuses, or one per bonus; 1 − progress when annealing).
+    Returns the combined (T, N) reward and the normalised (and clipped) bonuses.
     """
+    anneals = [float(anneal)] * len(bonuses) if np.isscalar(anneal) else list(anneal)
+    clips = list(bonus_clips) if bonus_clips is not None else [None] * len(bonuses)
     reward = extrinsic
     if ext_scaler is not None:
         reward = np.clip(ext_scaler.scale(extrinsic, lasts), -reward_clip, reward_clip)
     scaled = [scaler.scale(b, lasts) for b, scaler in zip(bonuses, bonus_scalers, strict=True)]
-    for weight, b in zip(weights, scaled, strict=True):
-        reward = reward + anneal * weight * b
+    scaled = [b if clip is None else np.clip(b, -clip, clip) for b, clip in zip(scaled, clips, strict=True)]
+    for weight, factor, b in zip(weights, anneals, scaled, strict=True):
+        reward = reward + factor * weight * b
     return reward, scaled
+
+
+def bonus_anneal_factor(bonus: BonusConfig, anneal_all: bool, progress: float) -> float:
+    """The weight multiplier of one bonus at `progress` (0 at the start of training, 1 at the end): linear
+    to 0 at `bonus.anneal_until`, or over the whole run when the agent anneals every bonus; else 1."""
+    until = bonus.anneal_until if bonus.anneal_until is not None else (1.0 if anneal_all else None)
+    return 1.0 if until is None else max(0.0, 1.0 - progress / until)
 
 
 class TrajectoryBuffer:
@@ -129,6 +141,11 @@ class Agent:
             recurrent=cfg.recurrent,
             generator=self.generator,
         )
+        if cfg.ppo.minibatch_unit == "transitions" and self.belief.policy_parameters():
+            raise ValueError(
+                f"ppo.minibatch_unit 'transitions' needs a belief whose features are fixed in the rollout; the "
+                f"{cfg.belief!r} belief is trained through time by the RL loss: use 'envs'"
+            )
         self.model = ActorCritic(self.state_dim, self.belief.feature_dim, self.action_dim, cfg.ppo)
         self.optimizer = torch.optim.Adam(
             [*self.model.parameters(), *self.belief.policy_parameters()], lr=cfg.ppo.lr, eps=1e-5
@@ -438,6 +455,8 @@ class Agent:
         lasts = rollout["lasts"].numpy().astype(bool)
         extrinsic = rollout["rewards"].numpy().astype(np.float64)
         log: dict[str, Any] = {"reward/extrinsic_mean": float(extrinsic.mean())}
+        if p.sampled_action_cost > 0:
+            extrinsic = extrinsic - p.sampled_action_cost * self._excess_action_energy(rollout["actions"].numpy())
         raw_bonuses = []
         if self.bonuses:
             flat = BonusInput(
@@ -451,22 +470,25 @@ class Agent:
             for bonus in self.bonuses:
                 raw_bonuses.append(bonus.reward(flat).numpy().astype(np.float64).reshape(t_len, n))
                 log.update(bonus.update(flat))
-        anneal = 1.0 - iteration / iterations if cfg.anneal_bonus else 1.0
+        anneals = [bonus_anneal_factor(b, cfg.anneal_bonus, iteration / iterations) for b in cfg.bonuses]
         reward, scaled_bonuses = combine_rewards(
             extrinsic,
             raw_bonuses,
             weights=[b.weight for b in cfg.bonuses],
-            anneal=anneal,
+            anneal=anneals,
+            bonus_clips=[b.clip for b in cfg.bonuses],
             lasts=lasts,
             ext_scaler=ext_scaler if p.norm_reward else None,
             bonus_scalers=bonus_scalers,
             reward_clip=p.reward_clip,
         )
         weighted = {}
-        for bonus, config, raw, scaled in zip(self.bonuses, cfg.bonuses, raw_bonuses, scaled_bonuses, strict=True):
+        for bonus, config, factor, raw, scaled in zip(
+            self.bonuses, cfg.bonuses, anneals, raw_bonuses, scaled_bonuses, strict=True
+        ):
             log[f"bonus/{bonus.name}/raw_mean"] = float(raw.mean())
             log[f"bonus/{bonus.name}/scaled_mean"] = float(scaled.mean())
-            weighted[bonus.name] = anneal * config.weight * scaled
+            weighted[bonus.name] = factor * config.weight * scaled
         if weighted:
             # Each stream's share of the reward PPO sees (mean magnitude after normalisation and weighting).
             magnitude = {"extrinsic": float(np.abs(reward - sum(weighted.values())).mean())}
@@ -495,6 +517,13 @@ class Agent:
                 log.update({k: float(np.mean([x[k] for x in losses])) for k in losses[0]})
         return log
 
+    def _excess_action_energy(self, actions: np.ndarray) -> np.ndarray:
+        """|a|² − |clip(a)|² per step of sampled (T, N, A) actions: what a control cost on the sampled action
+        charges beyond the task's cost on the clipped one."""
+        a = actions.astype(np.float64)
+        clipped = np.clip(a, *self.action_bounds)
+        return np.sum(np.square(a), axis=-1) - np.sum(np.square(clipped), axis=-1)
+
     def _store_trajectories(self, rollout, lasts, buffer) -> None:
         """Cuts the rollout at BAMDP episode ends (synchronous across envs) into whole trajectories."""
         if not (lasts.all(axis=1) | ~lasts.any(axis=1)).all():
@@ -519,11 +548,17 @@ class Agent:
             chunks.append({k: v[start:] for k, v in pieces.items()})
 
     # Checkpoints --------------------------------------------------------------------------------------
-    def _modules_state(self) -> dict:
+    def _modules_state(self, deployable: bool = False) -> dict:
+        """Networks and statistics; `deployable` leaves out what only training needs (a bonus's input
+        buffer and optimiser: up to buffer_size inputs, which a saved agent does not carry)."""
+        bonuses = [b.state_dict() for b in self.bonuses]
+        if deployable:
+            pairs = zip(self.bonuses, bonuses, strict=True)
+            bonuses = [b.deployable(s) if hasattr(b, "deployable") else s for b, s in pairs]
         return {
             "model": self.model.state_dict(),
             "belief": self.belief.state_dict(),
-            "bonuses": [b.state_dict() for b in self.bonuses],
+            "bonuses": bonuses,
             "obs_stats": self.obs_stats.state_dict(),
         }
 
@@ -583,7 +618,7 @@ class Agent:
                 "obs_spec": self.obs_spec,
                 "action_bounds": self.action_bounds,
                 "position_keys": self.position_keys,
-                "modules": self._modules_state(),
+                "modules": self._modules_state(deployable=True),
             },
             path,
             kind="agent",

@@ -84,17 +84,22 @@ class InputSelector:
 class PriorNetwork(nn.Module):
     """RND's fixed random network f: each input part embedded separately, then an MLP.
 
-    Its output is multiplied by `prior_scale`. (The reference multiplies every weight instead, which
-    with four ReLU layers scales the output by prior_scale⁴ and leaves the predictor chasing targets of
-    order 10⁴; see docs for this deviation.)
+    `prior_scaling="output"` multiplies its output by `prior_scale`. `"weights"` multiplies every weight
+    and bias instead, as the reference code does: with four layers that scales large outputs by up to
+    prior_scale⁴ (and changes the function's shape, since biases grow with the weights), leaving the
+    predictor chasing targets of order 10⁴ at scale 10.
     """
 
     def __init__(self, parts: list[int], config: BonusConfig):
         super().__init__()
         self.parts = parts
-        self.scale = config.prior_scale
         self.embeds = nn.ModuleList(nn.Linear(p, config.part_embed) for p in parts)
         self.body = mlp([config.part_embed * len(parts), *config.hidden, config.out_dim], nn.ReLU)
+        self.scale = config.prior_scale if config.prior_scaling == "output" else 1.0
+        if config.prior_scaling == "weights":
+            with torch.no_grad():
+                for parameter in self.parameters():
+                    parameter.mul_(config.prior_scale)
         self.requires_grad_(False)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
@@ -127,6 +132,8 @@ class EnsembleRND:
         self.buffer_pos = 0
 
     def _normalized(self, x: torch.Tensor) -> torch.Tensor:
+        if self.config.input_norm == "none":
+            return x.float()
         return self.input_stats.normalize(x, clip=5.0).float()
 
     def errors(self, x: torch.Tensor) -> torch.Tensor:
@@ -181,13 +188,21 @@ class EnsembleRND:
         }
 
     def load_state_dict(self, state: dict) -> None:
+        """Loads a training checkpoint's state, or a deployed agent's (networks and statistics only: no
+        input buffer or optimiser, see `deployable`)."""
         self.priors.load_state_dict(state["priors"])
         self.predictors.load_state_dict(state["predictors"])
-        self.optimizer.load_state_dict(state["optimizer"])
         self.input_stats.load_state_dict(state["input_stats"])
-        self.buffer_len = len(state["buffer"])
-        self.buffer[: self.buffer_len] = state["buffer"]
-        self.buffer_pos = state["buffer_pos"]
+        if "optimizer" in state:
+            self.optimizer.load_state_dict(state["optimizer"])
+            self.buffer_len = len(state["buffer"])
+            self.buffer[: self.buffer_len] = state["buffer"]
+            self.buffer_pos = state["buffer_pos"]
+
+    @staticmethod
+    def deployable(state: dict) -> dict:
+        """The part of `state_dict()` a deployed agent needs to compute the bonus (not to train it)."""
+        return {k: state[k] for k in ("priors", "predictors", "input_stats")}
 
 
 class VAEErrorBonus:

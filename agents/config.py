@@ -11,6 +11,11 @@ import difflib
 from typing import Any
 
 
+def _check_choice(name: str, value: Any, choices: tuple[str, ...]) -> None:
+    if value not in choices:
+        raise ValueError(f"{name} must be one of {', '.join(map(repr, choices))}; got {value!r}")
+
+
 @dataclasses.dataclass(frozen=True)
 class PPOConfig:
     """PPO hyperparameters (reference: variBAD/HyperX on cheetah-dir)."""
@@ -26,6 +31,26 @@ class PPOConfig:
     minibatches: int = 4
     entropy_coef: float = 1e-4
     value_coef: float = 0.5
+    # "mse": 0.5 (V - R)^2. "clipped_huber": the reference code's 0.5 max(huber(V, R), huber(V_old + clip(V -
+    # V_old, ±clip), R)).
+    value_loss: str = "mse"
+    # Minibatches of whole env sequences ("envs", needed by a recurrent belief such as RL²) or of transitions
+    # shuffled across envs and steps ("transitions", the reference code for feed-forward policies).
+    minibatch_unit: str = "envs"
+    # Advantages standardised per minibatch ("minibatch") or once over the whole rollout ("batch", the reference).
+    advantage_norm: str = "minibatch"
+    # The task charges its control cost on the action clipped to the bounds; the reference's environment charged
+    # it on the sampled action. This adds coef * (|a|^2 - |clip(a)|^2) of the sampled action a to the training
+    # reward (0.05, the cheetah's control-cost weight, reproduces the reference); deployment is unaffected.
+    sampled_action_cost: float = 0.0
+
+    def __post_init__(self) -> None:
+        _check_choice("ppo.value_loss", self.value_loss, ("mse", "clipped_huber"))
+        _check_choice("ppo.minibatch_unit", self.minibatch_unit, ("envs", "transitions"))
+        _check_choice("ppo.advantage_norm", self.advantage_norm, ("minibatch", "batch"))
+        if self.sampled_action_cost < 0:
+            raise ValueError(f"ppo.sampled_action_cost must be >= 0, got {self.sampled_action_cost}")
+
     max_grad_norm: float = 0.5
     hidden: tuple[int, ...] = (128, 128)
     embed: int = 32  # state and belief features are each embedded to this size first (0: no embedding)
@@ -87,6 +112,25 @@ class BonusConfig:
     ensemble_size: int = 1  # B in eq. (8)-(9)
     beta: float = 1.0
     aleatoric: float = 0.0  # σ_A² in eq. (8)-(9)
+    # RND inputs: "running" divides by a running std (after the mean) and clips at ±5; "none" feeds them raw
+    # (metres, belief values), as the reference code does (rnd_norm_inputs=False).
+    input_norm: str = "running"
+    # How `prior_scale` enters the fixed prior network: "output" multiplies its output; "weights" multiplies
+    # every weight and bias, as the reference code does (rnd_init_weight_scale).
+    prior_scaling: str = "output"
+    clip: float | None = None  # clip this bonus to ±clip after normalisation, before weighting (reference oracle: 10)
+    # Linear annealing of this bonus's weight to 0 at this fraction of training (1.0: at the end, the reference's
+    # schedule; 0.5: twice as fast, e.g. a state bonus annealed before the hyper-state one); None: constant,
+    # unless AgentConfig.anneal_bonus anneals every bonus over the whole run.
+    anneal_until: float | None = None
+
+    def __post_init__(self) -> None:
+        _check_choice("input_norm", self.input_norm, ("running", "none"))
+        _check_choice("prior_scaling", self.prior_scaling, ("output", "weights"))
+        if self.clip is not None and not self.clip > 0:
+            raise ValueError(f"clip must be positive or null, got {self.clip}")
+        if self.anneal_until is not None and not self.anneal_until > 0:
+            raise ValueError(f"anneal_until must be a positive fraction of training or null, got {self.anneal_until}")
 
 
 @dataclasses.dataclass(frozen=True)

@@ -2,9 +2,10 @@
 
 Read top to bottom: `ActorCritic` maps (normalised state, belief features) to a Gaussian policy and a
 value; `compute_gae` turns a rollout into advantages, bootstrapping at truncations; `ppo_update` runs
-the clipped objective over epochs and minibatches. Minibatches are groups of whole env sequences, so
-that a recurrent belief (RL²) can be re-run through time with gradients; the other beliefs hand back
-the features stored in the rollout.
+the clipped objective over epochs and minibatches. Minibatches are groups of whole env sequences by
+default, so that a recurrent belief (RL²) can be re-run through time with gradients (the other beliefs
+hand back the features stored in the rollout); `minibatch_unit="transitions"` shuffles single
+transitions instead, as the reference code does for feed-forward policies.
 """
 
 from __future__ import annotations
@@ -85,6 +86,43 @@ def compute_gae(
     return advantages, advantages + values
 
 
+def _minibatches(rollout: dict[str, torch.Tensor], belief, config: PPOConfig, generator: torch.Generator):
+    """One epoch's minibatches: (state, features, actions, old log-probs, advantages, returns, old values).
+
+    "envs": groups of whole env sequences, (T, n, ...) each, the belief's features recomputed through time
+    where the RL loss trains the belief. "transitions": all T·N transitions shuffled, (m, ...) each, with
+    the features stored in the rollout (beliefs not trained by the RL loss only).
+    """
+    keys = ("policy_state", "actions", "logprobs", "advantages", "returns", "values")
+    if config.minibatch_unit == "envs":
+        num_envs = rollout["actions"].shape[1]
+        per_batch = max(1, num_envs // config.minibatches)
+        order = torch.randperm(num_envs, generator=generator)
+        for start in range(0, num_envs, per_batch):
+            idx = order[start : start + per_batch]
+            state, actions, logprobs, adv, returns, values = (rollout[k][:, idx] for k in keys)
+            yield state, belief.sequence_features(rollout, idx), actions, logprobs, adv, returns, values
+    else:
+        t_len, num_envs = rollout["actions"].shape[:2]
+        total = t_len * num_envs
+        flat = {k: rollout[k].reshape(total, *rollout[k].shape[2:]) for k in (*keys, "features")}
+        per_batch = max(1, total // config.minibatches)
+        order = torch.randperm(total, generator=generator)
+        for start in range(0, total, per_batch):
+            idx = order[start : start + per_batch]
+            state, actions, logprobs, adv, returns, values = (flat[k][idx] for k in keys)
+            yield state, flat["features"][idx], actions, logprobs, adv, returns, values
+
+
+def value_loss(value: torch.Tensor, returns: torch.Tensor, old_value: torch.Tensor, config: PPOConfig) -> torch.Tensor:
+    """0.5 (V − R)², or the reference code's clipped Huber loss (`config.value_loss`)."""
+    if config.value_loss == "mse":
+        return 0.5 * (value - returns).pow(2).mean()
+    clipped = old_value + (value - old_value).clamp(-config.clip, config.clip)
+    huber = nn.functional.smooth_l1_loss
+    return 0.5 * torch.max(huber(value, returns, reduction="none"), huber(clipped, returns, reduction="none")).mean()
+
+
 def ppo_update(
     model: ActorCritic,
     belief,
@@ -93,9 +131,10 @@ def ppo_update(
     config: PPOConfig,
     generator: torch.Generator,
 ) -> dict[str, float]:
-    """Clipped-objective PPO epochs over env-sequence minibatches; returns mean losses."""
-    num_envs = rollout["actions"].shape[1]
-    per_batch = max(1, num_envs // config.minibatches)
+    """Clipped-objective PPO epochs over minibatches (`_minibatches`); returns mean losses."""
+    if config.advantage_norm == "batch":
+        adv = rollout["advantages"]
+        rollout = {**rollout, "advantages": (adv - adv.mean()) / (adv.std() + 1e-8)}
     params = [p for group in optimizer.param_groups for p in group["params"]]
     stats: dict[str, list[float]] = {
         "policy_loss": [],
@@ -105,28 +144,26 @@ def ppo_update(
         "clip_fraction": [],
     }
     for _ in range(config.epochs):
-        order = torch.randperm(num_envs, generator=generator)
-        for start in range(0, num_envs, per_batch):
-            idx = order[start : start + per_batch]
-            features = belief.sequence_features(rollout, idx)
-            state = rollout["policy_state"][:, idx]
+        for state, features, actions, old_logp, adv, returns, old_values in _minibatches(
+            rollout, belief, config, generator
+        ):
             dist = model.distribution(state, features)
-            logp = dist.log_prob(rollout["actions"][:, idx]).sum(-1)
-            log_ratio = logp - rollout["logprobs"][:, idx]
+            logp = dist.log_prob(actions).sum(-1)
+            log_ratio = logp - old_logp
             ratio = log_ratio.exp()
-            adv = rollout["advantages"][:, idx]
-            adv = (adv - adv.mean()) / (adv.std() + 1e-8)
+            if config.advantage_norm == "minibatch":
+                adv = (adv - adv.mean()) / (adv.std() + 1e-8)
             policy_loss = torch.max(-adv * ratio, -adv * ratio.clamp(1 - config.clip, 1 + config.clip)).mean()
-            value_loss = 0.5 * (model.value(state, features) - rollout["returns"][:, idx]).pow(2).mean()
+            v_loss = value_loss(model.value(state, features), returns, old_values, config)
             entropy = dist.entropy().sum(-1).mean()
-            loss = policy_loss + config.value_coef * value_loss - config.entropy_coef * entropy
+            loss = policy_loss + config.value_coef * v_loss - config.entropy_coef * entropy
             optimizer.zero_grad()
             loss.backward()
             nn.utils.clip_grad_norm_(params, config.max_grad_norm)
             optimizer.step()
             with torch.no_grad():
                 stats["policy_loss"].append(float(policy_loss))
-                stats["value_loss"].append(float(value_loss))
+                stats["value_loss"].append(float(v_loss))
                 stats["entropy"].append(float(entropy))
                 stats["approx_kl"].append(float(((ratio - 1) - log_ratio).mean()))
                 stats["clip_fraction"].append(float(((ratio - 1).abs() > config.clip).float().mean()))

@@ -1,7 +1,8 @@
 """Named agent presets: every curve of the paper's Figure 2, plus the baselines.
 
 `oracle_rh` etc. follow the paper's seed experiments: λ_h = λ_s = 10, each bonus and the extrinsic
-reward divided by its own rolling std (appendix C).
+reward divided by its own rolling std (appendix C). `hyperx_icml` and `oracle_rh_icml` follow the reference
+code's ICML configurations instead (see ICML_PPO below).
 """
 
 from __future__ import annotations
@@ -14,6 +15,15 @@ STATE_BONUS = BonusConfig(input="state")  # state_keys="task": the task's positi
 HYPERSTATE_BONUS = BonusConfig(input="hyperstate")
 # The reference scales the belief oracle's RND prior by 5 instead of 10.
 ORACLE_HYPERSTATE_BONUS = dataclasses.replace(HYPERSTATE_BONUS, prior_scale=5.0)
+
+# The reference code's ICML configurations for sparse cheetah-dir (config/sparse_cheetah_dir/cds_hyperx.py and
+# cds_belief_oracle.py): raw RND inputs, prior weights (not output) scaled, one predictor update per
+# iteration, bonuses annealed over the run; PPO with transition minibatches, whole-batch advantage
+# normalisation, the clipped Huber value loss, and the control cost charged on the sampled action.
+ICML_PPO = PPOConfig(
+    minibatch_unit="transitions", advantage_norm="batch", value_loss="clipped_huber", sampled_action_cost=0.05
+)
+_ICML_RND = dataclasses.replace(HYPERSTATE_BONUS, input_norm="none", prior_scaling="weights")
 
 PRESETS: dict[str, AgentConfig] = {
     "ppo": AgentConfig(belief="none"),
@@ -28,6 +38,24 @@ PRESETS: dict[str, AgentConfig] = {
     "varibad_rh": AgentConfig(belief="varibad", bonuses=(HYPERSTATE_BONUS,)),
     "hyperx": AgentConfig(belief="varibad", bonuses=(HYPERSTATE_BONUS, STATE_BONUS)),
     "task_supervised": AgentConfig(belief="task_supervised"),
+    # HyperX as in the reference code: hyper-state RND x0.1 + VAE-error bonus x1.0, no state bonus.
+    "hyperx_icml": AgentConfig(
+        belief="varibad",
+        ppo=ICML_PPO,
+        bonuses=(
+            dataclasses.replace(_ICML_RND, weight=0.1),
+            BonusConfig(kind="vae_error", input="belief", weight=1.0),
+        ),
+        anneal_bonus=True,
+    ),
+    # The belief oracle as in the reference code: hyper-state RND x5 (prior weights x5), clipped at 10,
+    # a buffer of 1e7 inputs.
+    "oracle_rh_icml": AgentConfig(
+        belief="oracle",
+        ppo=ICML_PPO,
+        bonuses=(dataclasses.replace(_ICML_RND, weight=5.0, prior_scale=5.0, clip=10.0, buffer_size=10_000_000),),
+        anneal_bonus=True,
+    ),
     # Not a meta-learner: knows the task. evaluation/run.py trains it as the reference for regret.
     "task_aware": AgentConfig(belief="task_aware"),
 }

@@ -91,18 +91,19 @@ def cell_diagnostics(out: Path, cell: str, tasks_per_value: int = 1) -> Path | N
     support = suite.task_prior(task).support()
     held_out = evaluation_tasks(task, max(2, 0 if support is None else len(support)) * tasks_per_value)
     final_run = deploy(final, task, held_out)
-    reach = float(np.abs(final_run.observations[key]).max())
+    checkpoints = [(int(path.stem.split("_")[1]), Agent.load(path)) for path in snapshots]
+    runs = [deploy(agent, task, held_out) for _, agent in checkpoints]
+    # Wide enough for every position any checkpoint's deployments reached, and twice the zone.
+    reach = max(float(np.abs(run.observations[key]).max()) for run in [final_run, *runs])
     zone = getattr(suite.load(task, seed=0).task, "zone_radius", 0.0) or 0.0
     half_width = max(2.0 * zone, 1.1 * reach, 1.0)
     xs = np.linspace(-half_width, half_width, GRID_POINTS)
     frames, per_checkpoint, labels = [], [], None
-    for path in snapshots:
-        agent = Agent.load(path)
-        run = deploy(agent, task, held_out)
+    for (frame, agent), run in zip(checkpoints, runs, strict=True):
         labels, features = belief_values(run)
         template = {k: v[0, :1] for k, v in run.observations.items()}
         per_checkpoint.append(landscape(agent, template, key, xs, features))
-        frames.append(int(path.stem.split("_")[1]))
+        frames.append(frame)
     names = sorted(per_checkpoint[0])
     through_training = {n: np.stack([c[n] for c in per_checkpoint]) for n in names}  # (C, V, X)
     along = along_deployment(final, final_run, key, xs)  # (M, T, X)

@@ -77,7 +77,7 @@ def test_same_seed_same_numbers_different_seed_different():
     assert runs[0][1] != runs[2][1]
 
 
-@pytest.mark.parametrize("preset", ["hyperx", "rl2"])
+@pytest.mark.parametrize("preset", ["hyperx", "rl2", "hyperx_icml", "oracle_rh_icml"])
 def test_resume_from_checkpoint_equals_uninterrupted_run(preset, tmp_path):
     config = {**TINY, "checkpoint_every": 1}
     # A BAMDP episode (50 steps) spans two rollouts of 25 steps, so the checkpoint falls mid-episode.

@@ -1,0 +1,206 @@
+"""Fidelity options: the reference code's choices, each a config field, each checked against a known answer."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from hyperstate import agents
+from hyperstate.agents.agent import bonus_anneal_factor, combine_rewards
+from hyperstate.agents.bonuses import BonusInput, EnsembleRND, InputSelector, PriorNetwork
+from hyperstate.agents.config import BonusConfig, PPOConfig
+from hyperstate.agents.normalization import ReturnScaler
+from hyperstate.agents.ppo import ActorCritic, _minibatches, ppo_update, value_loss
+
+TINY = {"ppo.num_envs": 4, "ppo.rollout_length": 50, "vae.batch_trajectories": 2}
+
+
+def _batch(next_state: torch.Tensor, features: torch.Tensor) -> BonusInput:
+    m = next_state.shape[0]
+    return BonusInput(torch.zeros(m, 1), torch.zeros(m, 1), torch.zeros(m, 1), next_state, features, features)
+
+
+def test_raw_rnd_inputs_reach_the_networks_unnormalised():
+    config = BonusConfig(input="hyperstate", input_norm="none")
+    rnd = EnsembleRND(InputSelector("hyperstate", [0], 2), config, torch.Generator().manual_seed(0), "raw")
+    x = torch.tensor([[30.0], [-12.0], [0.5]])
+    belief = torch.tensor([[0.5, 0.5], [1.0, 0.0], [0.0, 1.0]])
+    inputs = torch.cat([x, belief], -1)
+    want = (rnd.predictors[0](inputs) - rnd.priors[0](inputs)).pow(2).mean(-1)
+    torch.testing.assert_close(rnd.reward(_batch(x, belief)), want)
+    # The default divides by the running std and clips at ±5: 30 m and 300 m look alike.
+    running = EnsembleRND(InputSelector("hyperstate", [0], 2), BonusConfig(), torch.Generator().manual_seed(0), "n")
+    running.input_stats.update(np.random.default_rng(0).normal(0, 1, (1000, 3)))
+    far = running.value(_batch(torch.tensor([[30.0], [300.0]]), torch.tensor([[0.5, 0.5], [0.5, 0.5]])))
+    assert far[0] == far[1]
+
+
+def test_prior_scaled_by_weights_or_by_output():
+    parts = [1, 2]
+    torch.manual_seed(3)
+    plain = PriorNetwork(parts, BonusConfig(prior_scale=1.0))
+    torch.manual_seed(3)
+    by_output = PriorNetwork(parts, BonusConfig(prior_scale=5.0))
+    torch.manual_seed(3)
+    by_weights = PriorNetwork(parts, BonusConfig(prior_scale=5.0, prior_scaling="weights"))
+    for p, w in zip(plain.parameters(), by_weights.parameters(), strict=True):
+        torch.testing.assert_close(w, 5.0 * p)  # every weight and bias, as the reference code
+    x = torch.randn(8, 3)
+    torch.testing.assert_close(by_output(x), 5.0 * plain(x))
+    # Our body layers start with zero biases, so scaling the weights scales the body's output by 5^3 on
+    # top of the scaled embedding (weights and biases): far more than 5.
+    ratio = (by_weights(x).norm() / plain(x).norm()).item()
+    assert 5.0**3 < ratio <= 5.0**4 * 1.0001
+
+
+def test_bonus_clip_and_per_bonus_annealing_in_eq_4():
+    rng = np.random.default_rng(0)
+    extrinsic, b1, b2 = rng.normal(0, 1, (6, 2)), 50 * rng.random((6, 2)), rng.random((6, 2))
+    b1[3, 1] = 5_000.0  # one outlier: after normalisation it stays far beyond the clip
+    lasts = np.zeros((6, 2), bool)
+
+    def combine(**kwargs):
+        scalers = [ReturnScaler(2, 0.9) for _ in range(3)]
+        return combine_rewards(
+            extrinsic, [b1, b2], weights=[2.0, 3.0], lasts=lasts, ext_scaler=scalers[0],
+            bonus_scalers=scalers[1:], reward_clip=10.0, **kwargs,
+        )  # fmt: skip
+
+    plain, plain_scaled = combine(anneal=1.0)
+    clipped, clipped_scaled = combine(anneal=[0.5, 0.25], bonus_clips=[1.5, None])
+    assert plain_scaled[0].max() > 1.5
+    np.testing.assert_array_equal(clipped_scaled[0], np.clip(plain_scaled[0], -1.5, 1.5))
+    np.testing.assert_array_equal(clipped_scaled[1], plain_scaled[1])
+    ext = plain - 2.0 * plain_scaled[0] - 3.0 * plain_scaled[1]
+    np.testing.assert_allclose(clipped, ext + 0.5 * 2.0 * clipped_scaled[0] + 0.25 * 3.0 * clipped_scaled[1])
+
+
+def test_anneal_schedules():
+    fast = BonusConfig(anneal_until=0.5)
+    constant = BonusConfig()
+    assert bonus_anneal_factor(fast, False, 0.25) == 0.5
+    assert bonus_anneal_factor(fast, True, 0.75) == 0.0  # its own schedule wins over the agent's
+    assert bonus_anneal_factor(constant, True, 0.25) == 0.75  # the agent anneals every bonus over the run
+    assert bonus_anneal_factor(constant, False, 0.9) == 1.0
+    with pytest.raises(ValueError, match="anneal_until"):
+        BonusConfig(anneal_until=0.0)
+
+
+def _rollout(t_len: int = 6, n: int = 4) -> dict:
+    g = torch.Generator().manual_seed(0)
+    return {
+        "policy_state": torch.randn(t_len, n, 3, generator=g),
+        "features": torch.randn(t_len, n, 2, generator=g),
+        "actions": torch.randn(t_len, n, 2, generator=g),
+        "logprobs": torch.randn(t_len, n, generator=g) - 2.0,
+        "advantages": 3.0 + 2.0 * torch.randn(t_len, n, generator=g),
+        "returns": torch.randn(t_len, n, generator=g),
+        "values": torch.randn(t_len, n, generator=g),
+    }
+
+
+class _StoredFeatures:
+    def sequence_features(self, rollout, idx):
+        return rollout["features"][:, idx]
+
+
+def test_transition_minibatches_partition_the_rollout():
+    rollout = _rollout()
+    config = PPOConfig(minibatch_unit="transitions", minibatches=3)
+    batches = list(_minibatches(rollout, _StoredFeatures(), config, torch.Generator().manual_seed(1)))
+    assert [b[0].shape for b in batches] == [(8, 3)] * 3
+    seen = torch.cat([b[1] for b in batches])  # features: every transition exactly once
+    assert sorted(map(tuple, seen.tolist())) == sorted(map(tuple, rollout["features"].reshape(-1, 2).tolist()))
+    envs = list(_minibatches(rollout, _StoredFeatures(), PPOConfig(minibatches=2), torch.Generator().manual_seed(1)))
+    assert [b[0].shape for b in envs] == [(6, 2, 3)] * 2  # whole env sequences
+
+
+def test_transition_minibatches_refuse_a_belief_trained_through_time():
+    with pytest.raises(ValueError, match="'recurrent' belief is trained through time"):
+        agents.make("rl2", **{"ppo.minibatch_unit": "transitions"}).check_task("cheetah_dir_sparse")
+
+
+def _update(config: PPOConfig) -> list[torch.Tensor]:
+    torch.manual_seed(0)
+    model = ActorCritic(3, 2, 2, config)
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-3)
+    ppo_update(model, _StoredFeatures(), optimizer, _rollout(), config, torch.Generator().manual_seed(2))
+    return [p.detach().clone() for p in model.parameters()]
+
+
+def test_whole_batch_advantage_normalisation():
+    # With one minibatch, normalising per minibatch and over the batch are the same computation.
+    one = {"minibatches": 1, "epochs": 1}
+    for a, b in zip(_update(PPOConfig(**one)), _update(PPOConfig(**one, advantage_norm="batch")), strict=True):
+        torch.testing.assert_close(a, b)
+    # With several, they differ.
+    per_minibatch = _update(PPOConfig(minibatches=4))
+    whole = _update(PPOConfig(minibatches=4, advantage_norm="batch"))
+    assert any(not torch.equal(a, b) for a, b in zip(per_minibatch, whole, strict=True))
+
+
+def test_clipped_huber_value_loss_by_hand():
+    config = PPOConfig(value_loss="clipped_huber", clip=0.1)
+    value, returns, old = torch.tensor([1.0, 0.0, 5.0]), torch.tensor([0.0, 3.0, 5.05]), torch.tensor([0.5, 0.0, 5.0])
+
+    def huber(a, b):
+        d = abs(a - b)
+        return 0.5 * d * d if d < 1 else d - 0.5
+
+    # Clipped predictions: 0.6 (moved 0.5 → 0.1), 0.0 (unchanged), 5.0.
+    want = 0.5 * np.mean([max(huber(1.0, 0.0), huber(0.6, 0.0)), huber(0.0, 3.0), huber(5.0, 5.05)])
+    assert value_loss(value, returns, old, config).item() == pytest.approx(want)
+    assert value_loss(value, returns, old, PPOConfig()).item() == pytest.approx(0.5 * np.mean([1.0, 9.0, 0.0025]))
+
+
+def test_control_cost_on_the_sampled_action():
+    agent = agents.make("oracle", **TINY)
+    agent.train("cheetah_dir_sparse", frames=200, seed=0, progress=False)
+    actions = np.array([[[0.5, -0.5, 0, 0, 0, 0], [1.5, -2.0, 0, 0, 0, 0.3]]])  # (T=1, N=2, 6)
+    np.testing.assert_allclose(agent._excess_action_energy(actions), [[0.0, (2.25 - 1.0) + (4.0 - 1.0)]])
+    # In training it lowers the reward PPO sees by coef × that excess (and only there).
+    costly = agents.make("oracle", **TINY, **{"ppo.sampled_action_cost": 0.05, "ppo.init_log_std": 1.0})
+    free = agents.make("oracle", **TINY, **{"ppo.init_log_std": 1.0})
+    a = costly.train("cheetah_dir_sparse", frames=200, seed=0, progress=False)[0]
+    b = free.train("cheetah_dir_sparse", frames=200, seed=0, progress=False)[0]
+    assert a["reward/extrinsic_mean"] == b["reward/extrinsic_mean"]  # the task's reward, logged before
+    assert a["ppo/value_loss"] != b["ppo/value_loss"]
+
+
+def test_icml_presets_are_the_reference_configurations():
+    hyperx = agents.get_preset("hyperx_icml")
+    assert [(b.kind, b.input, b.weight) for b in hyperx.bonuses] == [
+        ("rnd", "hyperstate", 0.1),
+        ("vae_error", "belief", 1.0),
+    ]
+    rnd = hyperx.bonuses[0]
+    assert (rnd.input_norm, rnd.prior_scaling, rnd.prior_scale, rnd.updates_per_iteration) == (
+        "none",
+        "weights",
+        10.0,
+        1,
+    )
+    assert hyperx.anneal_bonus and hyperx.belief == "varibad"
+    oracle = agents.get_preset("oracle_rh_icml")
+    (rnd,) = oracle.bonuses
+    assert (rnd.weight, rnd.prior_scale, rnd.clip, rnd.buffer_size, rnd.input_norm) == (
+        5.0,
+        5.0,
+        10.0,
+        10_000_000,
+        "none",
+    )
+    for preset in (hyperx, oracle):
+        p = preset.ppo
+        assert (p.minibatch_unit, p.advantage_norm, p.value_loss, p.sampled_action_cost) == (
+            "transitions", "batch", "clipped_huber", 0.05,
+        )  # fmt: skip
+        assert (
+            dataclasses.replace(
+                p, minibatch_unit="envs", advantage_norm="minibatch", value_loss="mse", sampled_action_cost=0.0
+            )
+            == PPOConfig()
+        )  # fmt: skip  (else the reference's PPO)
