@@ -24,6 +24,7 @@ from torch.nn import functional as F
 
 from hyperstate.agents.config import RecurrentConfig, VAEConfig
 from hyperstate.agents.networks import mlp
+from hyperstate.agents.rollout import Rollout
 
 
 @dataclasses.dataclass
@@ -47,10 +48,26 @@ class Trajectories:
 
 
 class Belief(Protocol):
-    """A belief component."""
+    """A belief component.
+
+    Capabilities (class attributes, so that a config answers them before anything is built):
+    `trainable` — it has its own objective, trained from stored whole trajectories (`train_step`);
+    `reads_true_task` — it hands the policy the true task (a reference, not a meta-learner);
+    `decodes_reward` — it can reconstruct rewards (`reconstruction_error`, for the VAE-error bonus).
+    """
 
     name: str
     feature_dim: int
+    trainable: bool
+    reads_true_task: bool
+    decodes_reward: bool
+
+    @classmethod
+    def build(
+        cls, *, state_dim: int, action_dim: int, obs_spec: dict, vae: VAEConfig, recurrent: RecurrentConfig,
+        generator: torch.Generator,
+    ) -> Belief:  # fmt: skip
+        """The component for a task with observation spec `obs_spec`; ValueError naming what it lacks."""
 
     def initial_state(self, n: int, obs: dict[str, torch.Tensor]) -> object:
         """b_0 for a batch of `n` first observations (`obs` holds their privileged keys)."""
@@ -67,7 +84,7 @@ class Belief(Protocol):
     def policy_parameters(self) -> list[nn.Parameter]:
         """Parameters trained by the RL loss (only RL²'s GRU)."""
 
-    def sequence_features(self, rollout: dict, env_index: torch.Tensor) -> torch.Tensor:
+    def sequence_features(self, rollout: Rollout, env_index: torch.Tensor) -> torch.Tensor:
         """(T, n, F) features of rollout steps for envs `env_index`, with gradients if RL-trained."""
 
     def train_step(self, trajectories: Trajectories) -> dict[str, float]:
@@ -85,11 +102,15 @@ def _where(mask: torch.Tensor, a: torch.Tensor, b: torch.Tensor) -> torch.Tensor
 class _Stateless:
     """Shared parts of beliefs that are not trained through the RL loss."""
 
+    trainable = False
+    reads_true_task = False
+    decodes_reward = False
+
     def policy_parameters(self) -> list[nn.Parameter]:
         return []
 
-    def sequence_features(self, rollout: dict, env_index: torch.Tensor) -> torch.Tensor:
-        return rollout["features"][:, env_index]
+    def sequence_features(self, rollout: Rollout, env_index: torch.Tensor) -> torch.Tensor:
+        return rollout.features[:, env_index]
 
     def train_step(self, trajectories: Trajectories) -> dict[str, float]:
         return {}
@@ -108,6 +129,10 @@ class NoBelief(_Stateless):
 
     def __init__(self, num_states: int):
         self.feature_dim = 0
+
+    @classmethod
+    def build(cls, *, state_dim, **_):
+        return cls(state_dim)
 
     def initial_state(self, n, obs):
         return torch.zeros(n, 0)
@@ -128,10 +153,18 @@ class OracleBelief(_Stateless):
     With `key="task"` it hands over the true task instead: the task-aware reference policy.
     """
 
-    def __init__(self, dim: int, key: str = "belief", name: str = "oracle"):
+    name = "oracle"
+    key = "belief"
+    missing = "the oracle belief needs a task with an exact belief (privileged `belief` observation)"
+
+    def __init__(self, dim: int):
         self.feature_dim = dim
-        self.key = key
-        self.name = name
+
+    @classmethod
+    def build(cls, *, obs_spec, **_):
+        if cls.key not in obs_spec:
+            raise ValueError(cls.missing)
+        return cls(int(np.prod(obs_spec[cls.key].shape)))
 
     def initial_state(self, n, obs):
         return obs[self.key].clone()
@@ -146,6 +179,16 @@ class OracleBelief(_Stateless):
         return state
 
 
+class TaskAwareBelief(OracleBelief):
+    """The true task parameters, read from the task's privileged `task` observation: the reference
+    policy that knows the task (not a meta-learner)."""
+
+    name = "task_aware"
+    key = "task"
+    missing = "task_aware needs the task's privileged `task` observation"
+    reads_true_task = True
+
+
 class RecurrentBelief:
     """RL²: a GRU over (s_{t+1}, a_t, r_t) whose hidden state (ReLU) is the policy's task summary.
 
@@ -154,6 +197,13 @@ class RecurrentBelief:
     """
 
     name = "recurrent"
+    trainable = False  # by the RL loss only (its parameters are `policy_parameters`)
+    reads_true_task = False
+    decodes_reward = False
+
+    @classmethod
+    def build(cls, *, state_dim, action_dim, recurrent, **_):
+        return cls(state_dim, action_dim, recurrent)
 
     def __init__(self, state_dim: int, action_dim: int, config: RecurrentConfig):
         self.config = config
@@ -200,13 +250,13 @@ class RecurrentBelief:
         BAMDP episodes start on the same step in every env, so the rollout splits into segments
         between starts, each one call of the cuDNN-style sequence GRU.
         """
-        h = rollout["belief_state0"][env_index]
+        h = rollout.belief_state0[env_index]
         inputs = self._input(
-            rollout["next_state"][:, env_index],
-            rollout["actions"][:, env_index],
-            rollout["rewards"][:, env_index, None],
+            rollout.next_state[:, env_index],
+            rollout.actions[:, env_index],
+            rollout.rewards[:, env_index, None],
         )
-        starts = rollout["starts"][:, env_index]
+        starts = rollout.starts[:, env_index]
         if not bool((starts.all(dim=1) | ~starts.any(dim=1)).all()):
             raise RuntimeError("BAMDP episodes must start on the same step in every env")
         bounds = [0, *[t for t in torch.nonzero(starts[:, 0]).flatten().tolist() if t > 0], inputs.shape[0]]
@@ -286,6 +336,13 @@ class VariBADBelief:
     """variBAD: the posterior of a VAE over the task, trained with the ELBO of eq. (7)."""
 
     name = "varibad"
+    trainable = True
+    reads_true_task = False
+    decodes_reward = True
+
+    @classmethod
+    def build(cls, *, state_dim, action_dim, vae, generator, **_):
+        return cls(state_dim, action_dim, vae, generator)
 
     def __init__(self, state_dim: int, action_dim: int, config: VAEConfig, seed_generator: torch.Generator):
         self.config = config
@@ -322,7 +379,7 @@ class VariBADBelief:
         return []
 
     def sequence_features(self, rollout, env_index):
-        return rollout["features"][:, env_index]
+        return rollout.features[:, env_index]
 
     # Training ---------------------------------------------------------------------------------
     def sample_latent(self, mean: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:
@@ -392,6 +449,13 @@ class TaskSupervisedBelief(VariBADBelief):
     """The variBAD encoder trained to regress the true task parameters from every latent (plus KL)."""
 
     name = "task_supervised"
+    decodes_reward = False
+
+    @classmethod
+    def build(cls, *, state_dim, action_dim, obs_spec, vae, generator, **_):
+        if "task" not in obs_spec:
+            raise ValueError("task_supervised needs the task's privileged `task` observation")
+        return cls(state_dim, action_dim, vae, generator, int(np.prod(obs_spec["task"].shape)))
 
     def __init__(self, state_dim, action_dim, config, seed_generator, task_dim: int):
         self._task_dim = task_dim
@@ -415,7 +479,20 @@ class TaskSupervisedBelief(VariBADBelief):
         raise NotImplementedError("task_supervised has no reward decoder; use the vae_error bonus with varibad")
 
 
-BELIEFS = ("none", "recurrent", "oracle", "varibad", "task_supervised", "task_aware")
+# The built-in components by name (a config's `belief` field).
+BELIEF_CLASSES: dict[str, type] = {
+    cls.name: cls
+    for cls in (NoBelief, RecurrentBelief, OracleBelief, VariBADBelief, TaskSupervisedBelief, TaskAwareBelief)
+}
+BELIEFS = tuple(BELIEF_CLASSES)
+
+
+def belief_class(name: str) -> type:
+    """The belief component registered as `name` (its capabilities are class attributes)."""
+    try:
+        return BELIEF_CLASSES[name]
+    except KeyError:
+        raise ValueError(f"unknown belief {name!r}; beliefs: {', '.join(BELIEF_CLASSES)}") from None
 
 
 def make_belief(
@@ -429,22 +506,6 @@ def make_belief(
     generator: torch.Generator,
 ) -> Belief:
     """Builds the belief component `name` for a task with observation spec `obs_spec`."""
-    if name == "none":
-        return NoBelief(state_dim)
-    if name == "oracle":
-        if "belief" not in obs_spec:
-            raise ValueError("the oracle belief needs a task with an exact belief (privileged `belief` observation)")
-        return OracleBelief(int(np.prod(obs_spec["belief"].shape)))
-    if name == "task_aware":
-        if "task" not in obs_spec:
-            raise ValueError("task_aware needs the task's privileged `task` observation")
-        return OracleBelief(int(np.prod(obs_spec["task"].shape)), key="task", name="task_aware")
-    if name == "recurrent":
-        return RecurrentBelief(state_dim, action_dim, recurrent)
-    if name == "varibad":
-        return VariBADBelief(state_dim, action_dim, vae, generator)
-    if name == "task_supervised":
-        if "task" not in obs_spec:
-            raise ValueError("task_supervised needs the task's privileged `task` observation")
-        return TaskSupervisedBelief(state_dim, action_dim, vae, generator, int(np.prod(obs_spec["task"].shape)))
-    raise ValueError(f"unknown belief {name!r}; beliefs: {', '.join(BELIEFS)}")
+    return belief_class(name).build(
+        state_dim=state_dim, action_dim=action_dim, obs_spec=obs_spec, vae=vae, recurrent=recurrent, generator=generator
+    )

@@ -209,8 +209,8 @@ class VAEErrorBonus:
     """variBAD's reward-reconstruction error for r_t under a latent sample of the posterior b_t."""
 
     def __init__(self, belief, name: str):
-        if not hasattr(belief, "reconstruction_error") or belief.name != "varibad":
-            raise ValueError("the vae_error bonus needs the varibad belief")
+        if not getattr(belief, "decodes_reward", False):
+            raise ValueError(f"the vae_error bonus needs a belief that decodes rewards (varibad), not {belief.name!r}")
         self.name = name
         self.belief = belief
 

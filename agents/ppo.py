@@ -10,6 +10,7 @@ transitions instead, as the reference code does for feed-forward policies.
 
 from __future__ import annotations
 
+import copy
 import math
 
 import numpy as np
@@ -18,6 +19,7 @@ from torch import nn
 
 from hyperstate.agents.config import PPOConfig
 from hyperstate.agents.networks import Embed, mlp
+from hyperstate.agents.rollout import Rollout
 
 
 class ActorCritic(nn.Module):
@@ -86,7 +88,7 @@ def compute_gae(
     return advantages, advantages + values
 
 
-def _minibatches(rollout: dict[str, torch.Tensor], belief, config: PPOConfig, generator: torch.Generator):
+def _minibatches(rollout: Rollout, belief, config: PPOConfig, generator: torch.Generator):
     """One epoch's minibatches: (state, features, actions, old log-probs, advantages, returns, old values).
 
     "envs": groups of whole env sequences, (T, n, ...) each, the belief's features recomputed through time
@@ -95,17 +97,17 @@ def _minibatches(rollout: dict[str, torch.Tensor], belief, config: PPOConfig, ge
     """
     keys = ("policy_state", "actions", "logprobs", "advantages", "returns", "values")
     if config.minibatch_unit == "envs":
-        num_envs = rollout["actions"].shape[1]
+        num_envs = rollout.actions.shape[1]
         per_batch = max(1, num_envs // config.minibatches)
         order = torch.randperm(num_envs, generator=generator)
         for start in range(0, num_envs, per_batch):
             idx = order[start : start + per_batch]
-            state, actions, logprobs, adv, returns, values = (rollout[k][:, idx] for k in keys)
+            state, actions, logprobs, adv, returns, values = (getattr(rollout, k)[:, idx] for k in keys)
             yield state, belief.sequence_features(rollout, idx), actions, logprobs, adv, returns, values
     else:
-        t_len, num_envs = rollout["actions"].shape[:2]
+        t_len, num_envs = rollout.actions.shape[:2]
         total = t_len * num_envs
-        flat = {k: rollout[k].reshape(total, *rollout[k].shape[2:]) for k in (*keys, "features")}
+        flat = {k: getattr(rollout, k).reshape(total, *getattr(rollout, k).shape[2:]) for k in (*keys, "features")}
         per_batch = max(1, total // config.minibatches)
         order = torch.randperm(total, generator=generator)
         for start in range(0, total, per_batch):
@@ -127,14 +129,15 @@ def ppo_update(
     model: ActorCritic,
     belief,
     optimizer: torch.optim.Optimizer,
-    rollout: dict[str, torch.Tensor],
+    rollout: Rollout,
     config: PPOConfig,
     generator: torch.Generator,
 ) -> dict[str, float]:
     """Clipped-objective PPO epochs over minibatches (`_minibatches`); returns mean losses."""
     if config.advantage_norm == "batch":
-        adv = rollout["advantages"]
-        rollout = {**rollout, "advantages": (adv - adv.mean()) / (adv.std() + 1e-8)}
+        adv = rollout.advantages
+        rollout = copy.copy(rollout)
+        rollout.advantages = (adv - adv.mean()) / (adv.std() + 1e-8)
     params = [p for group in optimizer.param_groups for p in group["params"]]
     stats: dict[str, list[float]] = {
         "policy_loss": [],

@@ -73,8 +73,10 @@ class CertaintyEquivalent:
 
 def reads_true_task(agent) -> bool:
     """Whether `agent`'s policy is conditioned on the true task (the task-aware reference); answers
-    from the config, so before training too."""
-    return agent.config.belief == "task_aware"
+    from its belief component's class, so before training too."""
+    from hyperstate.agents.beliefs import belief_class
+
+    return bool(belief_class(agent.config.belief).reads_true_task)
 
 
 def certainty_equivalent_metrics(

@@ -1,6 +1,7 @@
 """Unit tests of the agent components against hand computations."""
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -173,7 +174,7 @@ def test_recurrent_sequence_features_equal_online_features_across_resets():
             h = rl2.reset_where(h, starts[t], {})
         online.append(rl2.features(h))
         h = rl2.update(h, Transition(actions[t], rewards[t, :, None], next_state[t], {}))
-    rollout = {"belief_state0": h0, "next_state": next_state, "actions": actions, "rewards": rewards, "starts": starts}
+    rollout = SimpleNamespace(belief_state0=h0, next_state=next_state, actions=actions, rewards=rewards, starts=starts)
     recomputed = rl2.sequence_features(rollout, torch.tensor([2, 0]))
     torch.testing.assert_close(recomputed, torch.stack(online)[:, [2, 0]])
     assert recomputed.requires_grad
@@ -208,7 +209,7 @@ def test_presets_cover_figure_2():
 
 # Reward combination, eq. (4) ------------------------------------------------------------------------
 def test_combine_rewards_normalises_each_stream_weights_and_anneals():
-    from hyperstate.agents.agent import combine_rewards
+    from hyperstate.agents.trainer import combine_rewards
 
     rng = np.random.default_rng(0)
     extrinsic, b1, b2 = rng.normal(0, 30, (5, 3)), rng.random((5, 3)), 100 * rng.random((5, 3))

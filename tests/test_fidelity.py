@@ -3,17 +3,18 @@
 from __future__ import annotations
 
 import dataclasses
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import torch
 
 from hyperstate import agents
-from hyperstate.agents.agent import bonus_anneal_factor, combine_rewards
 from hyperstate.agents.bonuses import BonusInput, EnsembleRND, InputSelector, PriorNetwork
 from hyperstate.agents.config import BonusConfig, PPOConfig
 from hyperstate.agents.normalization import ReturnScaler
 from hyperstate.agents.ppo import ActorCritic, _minibatches, ppo_update, value_loss
+from hyperstate.agents.trainer import Trainer, bonus_anneal_factor, combine_rewards
 
 TINY = {"ppo.num_envs": 4, "ppo.rollout_length": 50, "vae.batch_trajectories": 2}
 
@@ -89,22 +90,22 @@ def test_anneal_schedules():
         BonusConfig(anneal_until=0.0)
 
 
-def _rollout(t_len: int = 6, n: int = 4) -> dict:
+def _rollout(t_len: int = 6, n: int = 4) -> SimpleNamespace:
     g = torch.Generator().manual_seed(0)
-    return {
-        "policy_state": torch.randn(t_len, n, 3, generator=g),
-        "features": torch.randn(t_len, n, 2, generator=g),
-        "actions": torch.randn(t_len, n, 2, generator=g),
-        "logprobs": torch.randn(t_len, n, generator=g) - 2.0,
-        "advantages": 3.0 + 2.0 * torch.randn(t_len, n, generator=g),
-        "returns": torch.randn(t_len, n, generator=g),
-        "values": torch.randn(t_len, n, generator=g),
-    }
+    return SimpleNamespace(
+        policy_state=torch.randn(t_len, n, 3, generator=g),
+        features=torch.randn(t_len, n, 2, generator=g),
+        actions=torch.randn(t_len, n, 2, generator=g),
+        logprobs=torch.randn(t_len, n, generator=g) - 2.0,
+        advantages=3.0 + 2.0 * torch.randn(t_len, n, generator=g),
+        returns=torch.randn(t_len, n, generator=g),
+        values=torch.randn(t_len, n, generator=g),
+    )
 
 
 class _StoredFeatures:
     def sequence_features(self, rollout, idx):
-        return rollout["features"][:, idx]
+        return rollout.features[:, idx]
 
 
 def test_transition_minibatches_partition_the_rollout():
@@ -113,7 +114,7 @@ def test_transition_minibatches_partition_the_rollout():
     batches = list(_minibatches(rollout, _StoredFeatures(), config, torch.Generator().manual_seed(1)))
     assert [b[0].shape for b in batches] == [(8, 3)] * 3
     seen = torch.cat([b[1] for b in batches])  # features: every transition exactly once
-    assert sorted(map(tuple, seen.tolist())) == sorted(map(tuple, rollout["features"].reshape(-1, 2).tolist()))
+    assert sorted(map(tuple, seen.tolist())) == sorted(map(tuple, rollout.features.reshape(-1, 2).tolist()))
     envs = list(_minibatches(rollout, _StoredFeatures(), PPOConfig(minibatches=2), torch.Generator().manual_seed(1)))
     assert [b[0].shape for b in envs] == [(6, 2, 3)] * 2  # whole env sequences
 
@@ -157,10 +158,9 @@ def test_clipped_huber_value_loss_by_hand():
 
 
 def test_control_cost_on_the_sampled_action():
-    agent = agents.make("oracle", **TINY)
-    agent.train("cheetah_dir_sparse", frames=200, seed=0, progress=False)
+    trainer = Trainer(agents.make("oracle", **TINY), "cheetah_dir_sparse", frames=200)
     actions = np.array([[[0.5, -0.5, 0, 0, 0, 0], [1.5, -2.0, 0, 0, 0, 0.3]]])  # (T=1, N=2, 6)
-    np.testing.assert_allclose(agent._excess_action_energy(actions), [[0.0, (2.25 - 1.0) + (4.0 - 1.0)]])
+    np.testing.assert_allclose(trainer.excess_action_energy(actions), [[0.0, (2.25 - 1.0) + (4.0 - 1.0)]])
     # In training it lowers the reward PPO sees by coef × that excess (and only there).
     costly = agents.make("oracle", **TINY, **{"ppo.sampled_action_cost": 0.05, "ppo.init_log_std": 1.0})
     free = agents.make("oracle", **TINY, **{"ppo.init_log_std": 1.0})

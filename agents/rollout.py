@@ -1,0 +1,70 @@
+"""The rollout: T steps of N environments, as typed, preallocated tensors that collection fills in place.
+
+Everything the learner, the bonuses and the beliefs read from a rollout is a field here (no string keys).
+One `Rollout` is allocated per training run and overwritten every iteration, so anything that must outlive
+an iteration (trajectory pieces kept for belief training) is copied out of it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import torch
+
+
+@dataclasses.dataclass
+class Rollout:
+    """One rollout. Shapes: T = rollout length, N = envs, S = state, F = belief features, A = actions."""
+
+    state: torch.Tensor  # (T, N, S) raw s_t
+    policy_state: torch.Tensor  # (T, N, S) s_t normalised as the policy saw it
+    next_state: torch.Tensor  # (T, N, S) raw s_{t+1} (the final observation where a BAMDP episode ended)
+    features: torch.Tensor  # (T, N, F) belief features b_t the action was chosen with
+    next_features: torch.Tensor  # (T, N, F) b_{t+1}, after the transition
+    actions: torch.Tensor  # (T, N, A) sampled actions
+    logprobs: torch.Tensor  # (T, N) log-probability of the sampled action
+    values: torch.Tensor  # (T, N) V(s_t, b_t)
+    next_values: torch.Tensor  # (T, N) V(s_{t+1}, b_{t+1})
+    rewards: torch.Tensor  # (T, N) raw extrinsic reward
+    lasts: torch.Tensor  # (T, N) 1.0 where the step ended a BAMDP episode
+    bootstrap: torch.Tensor  # (T, N) discount of V(s_{t+1}): 0 at terminations, else 1
+    starts: torch.Tensor  # (T, N) bool: s_t began a BAMDP episode
+    advantages: torch.Tensor  # (T, N) filled by the learner (GAE)
+    returns: torch.Tensor  # (T, N) filled by the learner: advantages + values
+    raw_obs: dict[str, np.ndarray]  # (T, N, ...) each observation key, as the environment returned it
+    tasks: np.ndarray | None  # (T, N, P) true task parameters, where the task hands them over
+    belief_state0: object = None  # the belief state before the first step (recurrent beliefs re-run from it)
+
+    @classmethod
+    def allocate(cls, t_len: int, n: int, state_dim: int, feature_dim: int, action_dim: int, obs_spec: dict) -> Rollout:
+        """Zeroed buffers for `t_len` steps of `n` envs; `obs_spec`: {key: (shape, dtype)}."""
+
+        def zeros(*shape: int, dtype: torch.dtype = torch.float32) -> torch.Tensor:
+            return torch.zeros(t_len, n, *shape, dtype=dtype)
+
+        raw_obs = {k: np.zeros((t_len, n, *shape), np.dtype(dtype)) for k, (shape, dtype) in obs_spec.items()}
+        return cls(
+            state=zeros(state_dim),
+            policy_state=zeros(state_dim),
+            next_state=zeros(state_dim),
+            features=zeros(feature_dim),
+            next_features=zeros(feature_dim),
+            actions=zeros(action_dim),
+            logprobs=zeros(),
+            values=zeros(),
+            next_values=zeros(),
+            rewards=zeros(),
+            lasts=zeros(),
+            bootstrap=zeros(),
+            starts=zeros(dtype=torch.bool),
+            advantages=zeros(),
+            returns=zeros(),
+            raw_obs=raw_obs,
+            tasks=raw_obs.get("task"),
+        )
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(T, N)."""
+        return tuple(self.rewards.shape)

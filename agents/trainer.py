@@ -1,0 +1,473 @@
+"""Training: a `Trainer` runs the loop over one `TrainState`, whose `state_dict` is the checkpoint.
+
+One iteration: collect a `Rollout` from `suite.batch` (the policy on normalised state ⊕ belief features,
+the belief updated with every transition), compute every bonus over the whole rollout in one batch,
+combine rewards by eq. (4) — extrinsic and each bonus divided by the std of its own running discounted
+return, bonuses weighted by λ and annealed on their schedules — then the PPO, bonus and belief updates.
+The `TrainState` holds everything (networks, optimiser, statistics, simulator state, the unfinished
+BAMDP episode, RNGs), so a run resumed from its checkpoint continues exactly where it stopped.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import time
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from hyperstate import suite
+from hyperstate.agents import config as config_lib
+from hyperstate.agents import serialization
+from hyperstate.agents.beliefs import Trajectories, Transition
+from hyperstate.agents.bonuses import BonusInput
+from hyperstate.agents.config import BonusConfig
+from hyperstate.agents.normalization import ReturnScaler
+from hyperstate.agents.policy import Policy
+from hyperstate.agents.ppo import compute_gae, gaussian_log_prob, ppo_update
+from hyperstate.agents.rollout import Rollout
+
+
+def combine_rewards(
+    extrinsic: np.ndarray,
+    bonuses: list[np.ndarray],
+    *,
+    weights: list[float],
+    anneal: float | Sequence[float],
+    lasts: np.ndarray,
+    ext_scaler: ReturnScaler | None,
+    bonus_scalers: list[ReturnScaler],
+    reward_clip: float,
+    bonus_clips: Sequence[float | None] | None = None,
+) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Eq. (4): r + Σ_i λ_i r_i, each stream divided by the std of its own running discounted return.
+
+    The extrinsic stream is normalised and clipped to ±`reward_clip` (unless `ext_scaler` is None);
+    each bonus is normalised, clipped to ±`bonus_clips[i]` where one is given, weighted, and multiplied by
+    its annealing factor (`anneal`: one for all bonuses, or one per bonus; 1 − progress when annealing).
+    Returns the combined (T, N) reward and the normalised (and clipped) bonuses.
+    """
+    anneals = [float(anneal)] * len(bonuses) if np.isscalar(anneal) else list(anneal)
+    clips = list(bonus_clips) if bonus_clips is not None else [None] * len(bonuses)
+    reward = extrinsic
+    if ext_scaler is not None:
+        reward = np.clip(ext_scaler.scale(extrinsic, lasts), -reward_clip, reward_clip)
+    scaled = [scaler.scale(b, lasts) for b, scaler in zip(bonuses, bonus_scalers, strict=True)]
+    scaled = [b if clip is None else np.clip(b, -clip, clip) for b, clip in zip(scaled, clips, strict=True)]
+    for weight, factor, b in zip(weights, anneals, scaled, strict=True):
+        reward = reward + factor * weight * b
+    return reward, scaled
+
+
+def bonus_anneal_factor(bonus: BonusConfig, anneal_all: bool, progress: float) -> float:
+    """The weight multiplier of one bonus at `progress` (0 at the start of training, 1 at the end): linear
+    to 0 at `bonus.anneal_until`, or over the whole run when the agent anneals every bonus; else 1."""
+    until = bonus.anneal_until if bonus.anneal_until is not None else (1.0 if anneal_all else None)
+    return 1.0 if until is None else max(0.0, 1.0 - progress / until)
+
+
+class TrajectoryBuffer:
+    """Whole BAMDP episodes for belief training (FIFO, `capacity` trajectories)."""
+
+    def __init__(self, capacity: int):
+        self.capacity = capacity
+        self.items: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
+
+    def add(self, states, actions, rewards, tasks) -> None:
+        for i in range(states.shape[1]):
+            self.items.append((states[:, i], actions[:, i], rewards[:, i], None if tasks is None else tasks[i]))
+        del self.items[: max(0, len(self.items) - self.capacity)]
+
+    def sample(self, n: int, generator: torch.Generator) -> Trajectories:
+        idx = torch.randint(len(self.items), (n,), generator=generator).tolist()
+        s, a, r, k = zip(*(self.items[i] for i in idx), strict=True)
+        tasks = None if k[0] is None else torch.as_tensor(np.stack(k), dtype=torch.float32)
+        return Trajectories(
+            torch.as_tensor(np.stack(s), dtype=torch.float32),
+            torch.as_tensor(np.stack(a), dtype=torch.float32),
+            torch.as_tensor(np.stack(r), dtype=torch.float32)[..., None],
+            tasks,
+        )
+
+
+@dataclasses.dataclass
+class Carry:
+    """What one iteration hands the next: the current observation, belief state and episode bookkeeping."""
+
+    obs: dict[str, np.ndarray]
+    belief: Any
+    is_start: np.ndarray  # (N,) the current observation begins a BAMDP episode
+    episode_return: np.ndarray  # (N,) extrinsic return of the unfinished BAMDP episode
+
+
+@dataclasses.dataclass
+class TrainState:
+    """Everything a training run needs to continue exactly; `state_dict()` is its checkpoint."""
+
+    task: str
+    seed: int
+    frames: int  # the run's whole budget (iterations × envs × rollout length); the LR schedule depends on it
+    policy: Policy
+    optimizer: torch.optim.Optimizer
+    env: Any  # the suite.BatchEnv being trained on
+    carry: Carry
+    ext_scaler: ReturnScaler
+    bonus_scalers: list[ReturnScaler]
+    trajectories: TrajectoryBuffer
+    # The unfinished BAMDP episode's pieces (copies), completed into `trajectories` by a later rollout.
+    episode_chunks: list[dict[str, np.ndarray]] = dataclasses.field(default_factory=list)
+    history: list[dict] = dataclasses.field(default_factory=list)
+    iteration: int = 0
+
+    def identity(self) -> tuple:
+        """What a checkpoint must match to resume this run."""
+        return (config_lib.to_dict(self.policy.config), self.task, self.seed, self.frames)
+
+    def state_dict(self) -> dict:
+        carry = self.carry
+        return {
+            "config": config_lib.to_dict(self.policy.config),
+            "task": self.task,
+            "seed": self.seed,
+            "frames": self.frames,
+            "iteration": self.iteration,
+            "modules": self.policy._modules_state(),
+            "optimizer": self.optimizer.state_dict(),
+            "env": self.env.state_dict(),
+            "carry": {
+                "obs": carry.obs,
+                "belief": carry.belief,
+                "is_start": carry.is_start,
+                "episode_return": carry.episode_return,
+            },
+            "episode_chunks": list(self.episode_chunks),
+            "history": self.history,
+            "ext_scaler": self.ext_scaler.state_dict(),
+            "bonus_scalers": [s.state_dict() for s in self.bonus_scalers],
+            "buffer": self.trajectories.items,
+            "generator": self.policy.generator.get_state(),
+            "torch_rng": torch.get_rng_state(),
+        }
+
+    def load_state_dict(self, saved: dict) -> None:
+        self.policy._load_modules_state(saved["modules"])
+        self.optimizer.load_state_dict(saved["optimizer"])
+        self.env.load_state_dict(saved["env"])
+        self.ext_scaler.load_state_dict(saved["ext_scaler"])
+        for scaler, state in zip(self.bonus_scalers, saved["bonus_scalers"], strict=True):
+            scaler.load_state_dict(state)
+        self.trajectories.items = list(saved["buffer"])
+        self.episode_chunks = list(saved["episode_chunks"])
+        self.policy.generator.set_state(saved["generator"])
+        torch.set_rng_state(saved["torch_rng"])
+        self.carry = Carry(**saved["carry"])
+        self.history = saved["history"]
+        self.iteration = saved["iteration"]
+
+
+class Trainer:
+    """Trains a `Policy` on a task: builds its `TrainState`, runs the iterations, checkpoints."""
+
+    def __init__(
+        self,
+        policy: Policy,
+        task: str,
+        frames: int,
+        seed: int = 0,
+        *,
+        task_kwargs: dict | None = None,
+        checkpoint_dir: str | os.PathLike | None = None,
+    ):
+        if frames <= 0:
+            raise ValueError(f"frames must be positive, got {frames}")
+        cfg, p = policy.config, policy.config.ppo
+        torch.set_num_threads(cfg.torch_threads)
+        env = suite.batch(
+            task, p.num_envs, seed=seed, num_threads=cfg.physics_threads, privileged=True, **(task_kwargs or {})
+        )
+        policy._build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(task))
+        self.policy = policy
+        self.iterations = math.ceil(frames / (p.num_envs * p.rollout_length))
+        optimizer = torch.optim.Adam(
+            [*policy.model.parameters(), *policy.belief.policy_parameters()], lr=p.lr, eps=1e-5
+        )
+        first = env.reset()
+        carry = Carry(
+            obs=first.observation,
+            belief=policy.belief.initial_state(p.num_envs, policy._tensors(first.observation)),
+            is_start=np.ones(p.num_envs, bool),
+            episode_return=np.zeros(p.num_envs),
+        )
+        self.state = TrainState(
+            task=task,
+            seed=seed,
+            frames=self.iterations * p.num_envs * p.rollout_length,
+            policy=policy,
+            optimizer=optimizer,
+            env=env,
+            carry=carry,
+            ext_scaler=ReturnScaler(p.num_envs, p.gamma),
+            bonus_scalers=[ReturnScaler(p.num_envs, p.gamma) for _ in policy.bonuses],
+            trajectories=TrajectoryBuffer(cfg.vae.buffer_trajectories),
+        )
+        self.rollout = Rollout.allocate(
+            p.rollout_length,
+            p.num_envs,
+            policy.state_dim,
+            policy.belief.feature_dim,
+            policy.action_dim,
+            policy.obs_spec,
+        )
+        self.checkpoint = Path(checkpoint_dir) / "checkpoint.pt" if checkpoint_dir else None
+
+    # The loop --------------------------------------------------------------------------------------
+    def run(
+        self,
+        *,
+        resume: bool = False,
+        progress: bool = True,
+        on_iteration: Callable[[dict], None] | None = None,
+        on_rollout: Callable[[dict], None] | None = None,
+        stop_after_iterations: int | None = None,
+    ) -> list[dict]:
+        """Runs the remaining iterations; returns the per-iteration log (see `Agent.train`)."""
+        state, p = self.state, self.policy.config.ppo
+        if resume and self.checkpoint is not None and self.checkpoint.exists():
+            self.restore(self.checkpoint)
+        start_iteration = state.iteration
+        elapsed = state.history[-1]["wall_seconds"] if state.history else 0.0
+        bar = tqdm(
+            total=self.iterations,
+            initial=start_iteration,
+            disable=not progress,
+            desc=f"{self.policy.name} on {state.task}",
+            unit="it",
+            dynamic_ncols=True,
+        )
+        started = time.perf_counter() - elapsed
+        frames_per_iteration = p.num_envs * p.rollout_length
+        for iteration in range(start_iteration, self.iterations):
+            if p.anneal_lr:
+                for group in state.optimizer.param_groups:
+                    group["lr"] = p.lr * (1.0 - iteration / self.iterations)
+            t0 = time.perf_counter()
+            returns = self.collect()
+            collect_seconds = time.perf_counter() - t0
+            if on_rollout is not None:
+                on_rollout(self.rollout.raw_obs)
+            log = self.learn(iteration)
+            log.update(
+                iteration=iteration + 1,
+                frames=(iteration + 1) * frames_per_iteration,
+                wall_seconds=time.perf_counter() - started,
+                fps=frames_per_iteration / (time.perf_counter() - t0),
+                collect_fps=frames_per_iteration / collect_seconds,
+                train_return=float(np.mean(returns)) if returns else None,
+            )
+            state.history.append(log)
+            state.iteration = iteration + 1
+            if on_iteration is not None:
+                on_iteration(log)
+            bar.update(1)
+            if log["train_return"] is not None:
+                bar.set_postfix(ret=f"{log['train_return']:.1f}", fps=f"{log['fps']:.0f}")
+            done = state.iteration == self.iterations
+            stopping = stop_after_iterations is not None and state.iteration - start_iteration >= stop_after_iterations
+            if self.checkpoint is not None and (
+                state.iteration % self.policy.config.checkpoint_every == 0 or done or stopping
+            ):
+                self.save_checkpoint(self.checkpoint)
+            if stopping:
+                break
+        bar.close()
+        state.env.close()
+        return state.history
+
+    # Checkpoints -------------------------------------------------------------------------------------
+    def save_checkpoint(self, path: Path) -> None:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        serialization.save(self.state.state_dict(), tmp, kind="checkpoint")
+        os.replace(tmp, path)  # atomic: a crash leaves the previous checkpoint intact
+
+    def restore(self, path: Path) -> None:
+        saved = serialization.load(path, kind="checkpoint")
+        if (saved["config"], saved["task"], saved["seed"], saved["frames"]) != self.state.identity():
+            raise ValueError(f"checkpoint {path} was written by a different run (config, task, seed or frames)")
+        self.state.load_state_dict(saved)
+
+    # Collection ----------------------------------------------------------------------------------------
+    def collect(self) -> list[float]:
+        """Fills `self.rollout` with `rollout_length` steps of every env; returns the extrinsic returns of
+        the BAMDP episodes that ended during it."""
+        policy, state, r = self.policy, self.state, self.rollout
+        p = policy.config.ppo
+        carry = state.carry
+        obs, bstate, is_start, episode_return = carry.obs, carry.belief, carry.is_start, carry.episode_return
+        r.belief_state0 = bstate
+        completed: list[float] = []
+        with torch.inference_mode():
+            for t in range(p.rollout_length):
+                raw = policy._state_vector(obs)
+                if p.norm_obs:
+                    policy.obs_stats.update(raw)
+                normalized = policy._normalized(raw)
+                features = policy.belief.features(bstate)
+                mean, std = policy.model.mean_std(normalized, features)
+                noise = torch.randn(mean.shape, generator=policy.generator)
+                action = mean + std * noise
+                value = policy.model.value(normalized, features)
+                out = state.env.step(action.numpy().astype(np.float64))
+                final = out.final_observation
+                next_raw = policy._state_vector(final)
+                reward = torch.as_tensor(out.reward, dtype=torch.float32)[:, None]
+                transition = Transition(
+                    action, reward, torch.as_tensor(next_raw, dtype=torch.float32), policy._tensors(final)
+                )
+                bnext = policy.belief.update(bstate, transition)
+                next_features = policy.belief.features(bnext)
+                last = out.last
+                r.next_values[t] = 0.0
+                if last.any():
+                    r.next_values[t] = policy.model.value(policy._normalized(next_raw), next_features)
+                    bnext = policy.belief.reset_where(bnext, torch.as_tensor(last), policy._tensors(out.observation))
+                for k, v in obs.items():
+                    r.raw_obs[k][t] = v
+                episode_return = episode_return + out.reward
+                completed.extend(episode_return[last].tolist())
+                episode_return = np.where(last, 0.0, episode_return)
+                r.state[t] = torch.as_tensor(raw, dtype=torch.float32)
+                r.policy_state[t] = normalized
+                r.next_state[t] = transition.next_state
+                r.features[t] = features
+                r.next_features[t] = next_features
+                r.actions[t] = action
+                r.logprobs[t] = gaussian_log_prob(noise, std)
+                r.values[t] = value
+                r.rewards[t] = reward[:, 0]
+                r.lasts[t] = torch.as_tensor(last, dtype=torch.float32)
+                r.bootstrap[t] = torch.as_tensor(out.discount, dtype=torch.float32)
+                r.starts[t] = torch.as_tensor(is_start)
+                obs, bstate, is_start = out.observation, bnext, last
+            final_value = policy.model.value(
+                policy._normalized(policy._state_vector(obs)), policy.belief.features(bstate)
+            )
+            # V(s_{t+1}) for steps that did not end an episode is the next step's value; only episode ends
+            # bootstrap with the discount the environment gave.
+            lasts = r.lasts.bool()
+            following = torch.cat([r.values[1:], final_value[None]])
+            r.next_values.copy_(torch.where(lasts, r.next_values, following))
+            r.bootstrap.copy_(torch.where(lasts, r.bootstrap, torch.ones_like(r.bootstrap)))
+        state.carry = Carry(obs, bstate, is_start, episode_return)
+        return completed
+
+    # Learning ------------------------------------------------------------------------------------------
+    def learn(self, iteration: int) -> dict:
+        """Bonuses, eq. (4), GAE, PPO, bonus and belief updates on the collected rollout; returns the log."""
+        policy, state, rollout = self.policy, self.state, self.rollout
+        p, cfg = policy.config.ppo, policy.config
+        t_len, n = rollout.shape
+        lasts = rollout.lasts.numpy().astype(bool)
+        extrinsic = rollout.rewards.numpy().astype(np.float64)
+        log: dict[str, Any] = {"reward/extrinsic_mean": float(extrinsic.mean())}
+        if p.sampled_action_cost > 0:
+            extrinsic = extrinsic - p.sampled_action_cost * self.excess_action_energy(rollout.actions.numpy())
+        raw_bonuses = []
+        if policy.bonuses:
+            flat = BonusInput(
+                state=rollout.state.reshape(t_len * n, -1),
+                action=rollout.actions.reshape(t_len * n, -1),
+                reward=rollout.rewards.reshape(t_len * n, 1),
+                next_state=rollout.next_state.reshape(t_len * n, -1),
+                features=rollout.features.reshape(t_len * n, -1),
+                next_features=rollout.next_features.reshape(t_len * n, -1),
+            )
+            for bonus in policy.bonuses:
+                raw_bonuses.append(bonus.reward(flat).numpy().astype(np.float64).reshape(t_len, n))
+                log.update(bonus.update(flat))
+        anneals = [bonus_anneal_factor(b, cfg.anneal_bonus, iteration / self.iterations) for b in cfg.bonuses]
+        reward, scaled_bonuses = combine_rewards(
+            extrinsic,
+            raw_bonuses,
+            weights=[b.weight for b in cfg.bonuses],
+            anneal=anneals,
+            bonus_clips=[b.clip for b in cfg.bonuses],
+            lasts=lasts,
+            ext_scaler=state.ext_scaler if p.norm_reward else None,
+            bonus_scalers=state.bonus_scalers,
+            reward_clip=p.reward_clip,
+        )
+        weighted = {}
+        for bonus, config, factor, raw, scaled in zip(
+            policy.bonuses, cfg.bonuses, anneals, raw_bonuses, scaled_bonuses, strict=True
+        ):
+            log[f"bonus/{bonus.name}/raw_mean"] = float(raw.mean())
+            log[f"bonus/{bonus.name}/scaled_mean"] = float(scaled.mean())
+            weighted[bonus.name] = factor * config.weight * scaled
+        if weighted:
+            # Each stream's share of the reward PPO sees (mean magnitude after normalisation and weighting).
+            magnitude = {"extrinsic": float(np.abs(reward - sum(weighted.values())).mean())}
+            magnitude.update({name: float(np.abs(w).mean()) for name, w in weighted.items()})
+            total = sum(magnitude.values()) or 1.0
+            log.update({f"reward_share/{name}": m / total for name, m in magnitude.items()})
+        advantages, returns = compute_gae(
+            reward,
+            rollout.values.numpy(),
+            rollout.next_values.numpy(),
+            lasts.astype(np.float64),
+            rollout.bootstrap.numpy(),
+            p.gamma,
+            p.gae_lambda,
+        )
+        rollout.advantages.copy_(torch.as_tensor(advantages, dtype=torch.float32))
+        rollout.returns.copy_(torch.as_tensor(returns, dtype=torch.float32))
+        log.update(ppo_update(policy.model, policy.belief, state.optimizer, rollout, p, policy.generator))
+        if policy.belief.trainable:
+            self.store_trajectories(lasts)
+            if state.trajectories.items:
+                losses = [
+                    policy.belief.train_step(state.trajectories.sample(cfg.vae.batch_trajectories, policy.generator))
+                    for _ in range(cfg.vae.updates_per_iteration)
+                ]
+                log.update({k: float(np.mean([x[k] for x in losses])) for k in losses[0]})
+        return log
+
+    def excess_action_energy(self, actions: np.ndarray) -> np.ndarray:
+        """|a|² − |clip(a)|² per step of sampled (T, N, A) actions: what a control cost on the sampled action
+        charges beyond the task's cost on the clipped one."""
+        a = actions.astype(np.float64)
+        clipped = np.clip(a, *self.policy.action_bounds)
+        return np.sum(np.square(a), axis=-1) - np.sum(np.square(clipped), axis=-1)
+
+    def store_trajectories(self, lasts: np.ndarray) -> None:
+        """Cuts the rollout at BAMDP episode ends (synchronous across envs) into whole trajectories."""
+        if not (lasts.all(axis=1) | ~lasts.any(axis=1)).all():
+            raise RuntimeError("BAMDP episodes must end on the same step in every env")
+        rollout, state = self.rollout, self.state
+        pieces = {
+            "state": rollout.state.numpy(),
+            "next_state": rollout.next_state.numpy(),
+            "actions": rollout.actions.numpy(),
+            "rewards": rollout.rewards.numpy(),
+        }
+        tasks = rollout.tasks
+        start = 0
+        chunks = state.episode_chunks
+        for t in np.flatnonzero(lasts[:, 0]):
+            chunks.append({k: v[start : t + 1] for k, v in pieces.items()})
+            whole = {k: np.concatenate([c[k] for c in chunks]) for k in pieces}
+            states = np.concatenate([whole["state"], whole["next_state"][-1:]])
+            state.trajectories.add(
+                states, whole["actions"], whole["rewards"], None if tasks is None else tasks[t].copy()
+            )
+            chunks.clear()
+            start = t + 1
+        if start < lasts.shape[0]:
+            # Copies: the rollout's buffers are overwritten by the next collection.
+            chunks.append({k: v[start:].copy() for k, v in pieces.items()})
