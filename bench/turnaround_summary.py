@@ -1,0 +1,90 @@
+"""Per-run turn-around table of a cheetah-direction grid, as markdown rows (docs/turnaround.md).
+
+    .venv/bin/python bench/turnaround_summary.py runs/fig2_20m [--json OUT.json]
+
+For every finished cell: the final online return, returns on forward / backward tasks, the share of
+deployments whose first exit was on the wrong side, the share of those that ended beyond the zone on the
+right side (`turned_around`), their mean return, correct direction, stuck, the stochastic policy's return
+where recorded, the curve every 2M frames, and each deployment's final x. Computed from each cell's
+`deployment.npz` with the task's own metrics (`suite.exploration_metrics`), so older grids work too.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from hyperstate import suite
+
+
+def cell_rows(out: Path) -> list[dict]:
+    rows = []
+    for cell in sorted((out / "cells").iterdir()):
+        record_path, npz = cell / "record.json", cell / "deployment.npz"
+        if not record_path.exists() or not npz.exists():
+            continue
+        record = json.loads(record_path.read_text())
+        if not record.get("complete"):
+            continue
+        data = np.load(npz)
+        metrics = suite.exploration_metrics(record["task"])(
+            {"x_displacement": data["obs_x_displacement"]}, data["rewards"], data["tasks"]
+        )
+        with warnings.catch_warnings():  # a metric that applies to no deployment is NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            means = {k: float(np.nanmean(v)) for k, v in metrics.items()}
+        rows.append(
+            {
+                "agent": record["agent"],
+                "seed": record["seed"],
+                "online_return": record["final"]["online_return"],
+                "stochastic_return": record["final"].get("stochastic", {}).get("online_return"),
+                **means,
+                "curve": [p["online_return"] for p in record["curve"]],
+                "final_x": data["obs_x_displacement"][-1, :, 0].tolist(),
+                "tasks": data["tasks"][:, 0].tolist(),
+            }
+        )
+    return rows
+
+
+def markdown(rows: list[dict]) -> str:
+    def f(v, spec=".0f"):
+        return "—" if v is None or (isinstance(v, float) and np.isnan(v)) else format(v, spec)
+
+    lines = [
+        "| run | online return | R forward | R backward | wrong first | turned | R wrong-first | correct dir. | stuck "
+        "| stochastic | curve every 2M |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        curve = ", ".join(f(v) for v in r["curve"][1::2])
+        lines.append(
+            f"| `{r['agent']}` s{r['seed']} | {f(r['online_return'])} | {f(r['return_forward'])} | "
+            f"{f(r['return_backward'])} | {f(r['wrong_first_exit'], '.2f')} | {f(r['turned_around'], '.2f')} | "
+            f"{f(r['return_wrong_first'])} | {f(r['correct_direction'], '.2f')} | {f(r['stuck'], '.2f')} | "
+            f"{f(r['stochastic_return'])} | {curve} |"
+        )
+    return "\n".join(lines)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--json", type=Path, default=None)
+    args = parser.parse_args()
+    rows = cell_rows(args.out)
+    print(markdown(rows))
+    for r in rows:
+        moves = " ".join(f"{t:+.0f}:{x:+.0f}" for t, x in zip(r["tasks"], r["final_x"], strict=True))
+        print(f"{r['agent']} s{r['seed']} final x per task (direction:x): {moves}")
+    if args.json:
+        args.json.write_text(json.dumps(rows, indent=1))
+
+
+if __name__ == "__main__":
+    main()
