@@ -3,6 +3,10 @@
 agent = agents.make("hyperx", **{"ppo.num_envs": 32})
 log = agent.train("cheetah_dir_sparse", frames=1_000_000, seed=0, checkpoint_dir="runs/x")
 action, state = agent.act(obs)                      # deployment, from the prior belief
+
+Components are chosen by name from registries, the built-in ones included; bring your own with
+`register_belief(name)` / `register_bonus(kind)` (class decorators) and name a config with
+`register_preset(name, config)` (see docs/new_agent.md).
 """
 
 from __future__ import annotations
@@ -10,13 +14,16 @@ from __future__ import annotations
 from typing import Any
 
 from hyperstate.agents.agent import Agent, AgentState
+from hyperstate.agents.beliefs import Belief, Trajectories, Transition, list_beliefs, register_belief
+from hyperstate.agents.bonuses import Bonus, BonusInput, list_bonuses, register_bonus
 from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig, RecurrentConfig, VAEConfig, apply_overrides
-from hyperstate.agents.presets import PRESETS, get_preset, list_presets
+from hyperstate.agents.presets import PRESETS, check_components, get_preset, list_presets, register_preset
 
 
 def make(preset: str, **overrides: Any) -> Agent:
     """The agent of a named preset, with config overrides (dotted names or nested dicts)."""
     config = apply_overrides(get_preset(preset), overrides)
+    check_components(config)
     return Agent(config, name=preset)
 
 
@@ -25,12 +32,22 @@ __all__ = [
     "Agent",
     "AgentConfig",
     "AgentState",
+    "Belief",
+    "Bonus",
     "BonusConfig",
+    "BonusInput",
     "PPOConfig",
     "RecurrentConfig",
+    "Trajectories",
+    "Transition",
     "VAEConfig",
     "apply_overrides",
     "get_preset",
+    "list_beliefs",
+    "list_bonuses",
     "list_presets",
     "make",
+    "register_belief",
+    "register_bonus",
+    "register_preset",
 ]

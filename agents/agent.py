@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from collections.abc import Callable
 
+from hyperstate.agents.beliefs import belief_class
 from hyperstate.agents.policy import AgentState, Policy
 from hyperstate.agents.trainer import Trainer, bonus_anneal_factor, combine_rewards
 
@@ -20,7 +21,14 @@ __all__ = ["Agent", "AgentState", "bonus_anneal_factor", "combine_rewards"]
 
 
 class Agent(Policy):
-    """A meta-RL agent assembled from a config; see `agents.make`."""
+    """A meta-RL agent assembled from a config; see `agents.make`. It follows the benchmarkable-agent
+    protocol of `hyperstate.evaluation` (train, act, save, load, belief_features, reads_true_task)."""
+
+    @property
+    def reads_true_task(self) -> bool:
+        """Whether the policy is conditioned on the true task (the task-aware reference); known from the
+        config's belief component, so before training too."""
+        return bool(belief_class(self.config.belief).reads_true_task)
 
     def train(
         self,
@@ -38,7 +46,9 @@ class Agent(Policy):
     ) -> list[dict]:
         """Trains for `frames` environment steps on `task`; returns the per-iteration log.
 
-        `on_iteration(log)` is called after every iteration; `on_rollout(arrays)` gets the rollout's raw
+        `on_iteration(log)` is called after every iteration (`log["frames"]`: environment steps so far);
+        if it returns True, a checkpoint is written right then (the harness asks at its evaluation points,
+        so a resumed run rejoins its learning curve). `on_rollout(arrays)` gets the rollout's raw
         observations ((T, N, ...) arrays per key, overwritten by the next rollout), for metrics such as
         visitation. `stop_after_iterations` stops early (the run can later `resume`); checkpoints go to
         `checkpoint_dir/checkpoint.pt` every `checkpoint_every` iterations and at the end, and

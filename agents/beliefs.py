@@ -15,6 +15,8 @@ from a prior at the start of each BAMDP episode and is updated with each transit
 from __future__ import annotations
 
 import dataclasses
+import difflib
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -65,7 +67,7 @@ class Belief(Protocol):
     @classmethod
     def build(
         cls, *, state_dim: int, action_dim: int, obs_spec: dict, vae: VAEConfig, recurrent: RecurrentConfig,
-        generator: torch.Generator,
+        generator: torch.Generator, params: dict,
     ) -> Belief:  # fmt: skip
         """The component for a task with observation spec `obs_spec`; ValueError naming what it lacks."""
 
@@ -131,7 +133,8 @@ class NoBelief(_Stateless):
         self.feature_dim = 0
 
     @classmethod
-    def build(cls, *, state_dim, **_):
+    def build(cls, *, state_dim, params, **_):
+        no_params(cls.name, params)
         return cls(state_dim)
 
     def initial_state(self, n, obs):
@@ -161,7 +164,8 @@ class OracleBelief(_Stateless):
         self.feature_dim = dim
 
     @classmethod
-    def build(cls, *, obs_spec, **_):
+    def build(cls, *, obs_spec, params, **_):
+        no_params(cls.name, params)
         if cls.key not in obs_spec:
             raise ValueError(cls.missing)
         return cls(int(np.prod(obs_spec[cls.key].shape)))
@@ -202,7 +206,8 @@ class RecurrentBelief:
     decodes_reward = False
 
     @classmethod
-    def build(cls, *, state_dim, action_dim, recurrent, **_):
+    def build(cls, *, state_dim, action_dim, recurrent, params, **_):
+        no_params(cls.name, params)
         return cls(state_dim, action_dim, recurrent)
 
     def __init__(self, state_dim: int, action_dim: int, config: RecurrentConfig):
@@ -341,7 +346,8 @@ class VariBADBelief:
     decodes_reward = True
 
     @classmethod
-    def build(cls, *, state_dim, action_dim, vae, generator, **_):
+    def build(cls, *, state_dim, action_dim, vae, generator, params, **_):
+        no_params(cls.name, params)
         return cls(state_dim, action_dim, vae, generator)
 
     def __init__(self, state_dim: int, action_dim: int, config: VAEConfig, seed_generator: torch.Generator):
@@ -452,7 +458,8 @@ class TaskSupervisedBelief(VariBADBelief):
     decodes_reward = False
 
     @classmethod
-    def build(cls, *, state_dim, action_dim, obs_spec, vae, generator, **_):
+    def build(cls, *, state_dim, action_dim, obs_spec, vae, generator, params, **_):
+        no_params(cls.name, params)
         if "task" not in obs_spec:
             raise ValueError("task_supervised needs the task's privileged `task` observation")
         return cls(state_dim, action_dim, vae, generator, int(np.prod(obs_spec["task"].shape)))
@@ -479,20 +486,54 @@ class TaskSupervisedBelief(VariBADBelief):
         raise NotImplementedError("task_supervised has no reward decoder; use the vae_error bonus with varibad")
 
 
-# The built-in components by name (a config's `belief` field).
-BELIEF_CLASSES: dict[str, type] = {
-    cls.name: cls
-    for cls in (NoBelief, RecurrentBelief, OracleBelief, VariBADBelief, TaskSupervisedBelief, TaskAwareBelief)
-}
-BELIEFS = tuple(BELIEF_CLASSES)
+_BELIEFS: dict[str, type] = {}
+_BELIEF_METHODS = (
+    "build", "initial_state", "update", "reset_where", "features", "policy_parameters", "sequence_features",
+    "train_step", "state_dict", "load_state_dict",
+)  # fmt: skip
+
+
+def register_belief(name: str) -> Callable[[type], type]:
+    """Class decorator: makes a belief component selectable as `AgentConfig(belief=name)`.
+
+    The class follows the `Belief` protocol: a classmethod `build(*, state_dim, action_dim, obs_spec, vae,
+    recurrent, generator, params)` returning an instance (`params` is the config's `belief_params`, which
+    the component validates), and the protocol's methods. Its capabilities `trainable`, `reads_true_task`
+    and `decodes_reward` are class attributes (False where the class does not set them).
+    """
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"a belief name must be a non-empty string, got {name!r}")
+
+    def decorator(cls: type) -> type:
+        if name in _BELIEFS:
+            raise ValueError(f"belief {name!r} is already registered (by {_BELIEFS[name].__module__})")
+        missing = [m for m in _BELIEF_METHODS if not callable(getattr(cls, m, None))]
+        if missing:
+            lacks = ", ".join(missing)
+            raise TypeError(f"belief {name!r} ({cls.__qualname__}) lacks {lacks} (see agents.beliefs.Belief)")
+        for capability in ("trainable", "reads_true_task", "decodes_reward"):
+            if not hasattr(cls, capability):
+                setattr(cls, capability, False)
+        cls.name = name
+        _BELIEFS[name] = cls
+        return cls
+
+    return decorator
 
 
 def belief_class(name: str) -> type:
     """The belief component registered as `name` (its capabilities are class attributes)."""
     try:
-        return BELIEF_CLASSES[name]
+        return _BELIEFS[name]
     except KeyError:
-        raise ValueError(f"unknown belief {name!r}; beliefs: {', '.join(BELIEF_CLASSES)}") from None
+        close = difflib.get_close_matches(str(name), _BELIEFS, n=3)
+        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        raise ValueError(f"unknown belief {name!r}{hint}; beliefs: {', '.join(list_beliefs())}") from None
+
+
+def list_beliefs() -> list[str]:
+    """Registered belief names, sorted."""
+    return sorted(_BELIEFS)
 
 
 def make_belief(
@@ -504,8 +545,25 @@ def make_belief(
     vae: VAEConfig,
     recurrent: RecurrentConfig,
     generator: torch.Generator,
+    params: dict | None = None,
 ) -> Belief:
-    """Builds the belief component `name` for a task with observation spec `obs_spec`."""
+    """Builds the registered belief component `name` for a task with observation spec `obs_spec`."""
     return belief_class(name).build(
-        state_dim=state_dim, action_dim=action_dim, obs_spec=obs_spec, vae=vae, recurrent=recurrent, generator=generator
+        state_dim=state_dim,
+        action_dim=action_dim,
+        obs_spec=obs_spec,
+        vae=vae,
+        recurrent=recurrent,
+        generator=generator,
+        params=dict(params or {}),
     )
+
+
+def no_params(name: str, params: dict) -> None:
+    """For built-in components, which take no `params`: a clear error if some were given."""
+    if params:
+        raise ValueError(f"the {name!r} component takes no params; got {', '.join(map(repr, params))}")
+
+
+for _cls in (NoBelief, RecurrentBelief, OracleBelief, VariBADBelief, TaskSupervisedBelief, TaskAwareBelief):
+    register_belief(_cls.name)(_cls)

@@ -8,6 +8,8 @@ bonus per transition; its weight, normalisation and annealing live in the agent 
 from __future__ import annotations
 
 import dataclasses
+import difflib
+from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
@@ -32,9 +34,15 @@ class BonusInput:
 
 
 class Bonus(Protocol):
-    """An exploration bonus."""
+    """An exploration bonus (register your own with `agents.register_bonus`)."""
 
     name: str
+
+    @classmethod
+    def build(
+        cls, config: BonusConfig, *, state_columns: list[int], belief, generator: torch.Generator, name: str
+    ) -> Bonus:
+        """The component for one `BonusConfig` of an agent (see `register_bonus`)."""
 
     def reward(self, batch: BonusInput) -> torch.Tensor:
         """(M,) bonus per transition; no gradients."""
@@ -42,8 +50,9 @@ class Bonus(Protocol):
     def update(self, batch: BonusInput) -> dict[str, float]:
         """Trains on the rollout's inputs; returns logged losses."""
 
-    # Optional, for diagnostics (evaluation/diagnostics.py): `value(batch) -> (M,)`, the bonus a bonus of
-    # the hyper-state would pay at these inputs, learning nothing from them (no statistics updated).
+    # Optional: `value(batch) -> (M,)`, the bonus at these inputs learning nothing from them (no statistics
+    # updated), for diagnostics (evaluation/diagnostics.py); `deployable(state) -> dict`, the part of
+    # `state_dict()` a saved agent carries (without it, all of it).
 
     def state_dict(self) -> dict: ...
 
@@ -114,6 +123,13 @@ class EnsembleRND:
     e_i is the mean squared difference of predictor i and prior i over their outputs. With B = 1 this is
     plain RND (Burda et al. 2019): the bonus ‖f(x) − g(x)‖² (averaged over outputs).
     """
+
+    @classmethod
+    def build(cls, config: BonusConfig, *, state_columns, belief, generator, name) -> EnsembleRND:
+        _no_params(config)
+        if config.kind == "rnd" and config.ensemble_size != 1:
+            raise ValueError("kind 'rnd' has ensemble_size 1; use kind 'ensemble_rnd' for an ensemble")
+        return cls(InputSelector(config.input, state_columns, belief.feature_dim), config, generator, name)
 
     def __init__(self, selector: InputSelector, config: BonusConfig, generator: torch.Generator, name: str):
         self.name = name
@@ -208,6 +224,11 @@ class EnsembleRND:
 class VAEErrorBonus:
     """variBAD's reward-reconstruction error for r_t under a latent sample of the posterior b_t."""
 
+    @classmethod
+    def build(cls, config: BonusConfig, *, belief, name, **_) -> VAEErrorBonus:
+        _no_params(config)
+        return cls(belief, name)
+
     def __init__(self, belief, name: str):
         if not getattr(belief, "decodes_reward", False):
             raise ValueError(f"the vae_error bonus needs a belief that decodes rewards (varibad), not {belief.name!r}")
@@ -229,19 +250,64 @@ class VAEErrorBonus:
         pass
 
 
-BONUSES = ("rnd", "ensemble_rnd", "vae_error")
+_BONUSES: dict[str, type] = {}
+
+
+def register_bonus(kind: str) -> Callable[[type], type]:
+    """Class decorator: makes a bonus component selectable as `BonusConfig(kind=kind)`.
+
+    The class follows the `Bonus` protocol (`reward`, `update`, `state_dict`, `load_state_dict`; optionally
+    `value` for diagnostics) and has a classmethod `build(config, *, state_columns, belief, generator, name)`
+    returning an instance: `config` is its `BonusConfig` (own settings in `config.params`, which the
+    component validates), `state_columns` the state-vector columns of the config's `state_keys`, `belief`
+    the agent's belief component, `generator` the agent's seeded torch generator, `name` its log name.
+    """
+    if not isinstance(kind, str) or not kind:
+        raise ValueError(f"a bonus kind must be a non-empty string, got {kind!r}")
+
+    def decorator(cls: type) -> type:
+        if kind in _BONUSES:
+            raise ValueError(f"bonus kind {kind!r} is already registered (by {_BONUSES[kind].__module__})")
+        missing = [m for m in ("build", "reward", "update", "state_dict", "load_state_dict") if not hasattr(cls, m)]
+        if missing:
+            lacks = ", ".join(missing)
+            raise TypeError(f"bonus {kind!r} ({cls.__qualname__}) lacks {lacks} (see agents.bonuses.Bonus)")
+        _BONUSES[kind] = cls
+        return cls
+
+    return decorator
+
+
+def bonus_class(kind: str) -> type:
+    """The bonus component registered as `kind`."""
+    try:
+        return _BONUSES[kind]
+    except KeyError:
+        close = difflib.get_close_matches(str(kind), _BONUSES, n=3)
+        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        raise ValueError(f"unknown bonus kind {kind!r}{hint}; kinds: {', '.join(list_bonuses())}") from None
+
+
+def list_bonuses() -> list[str]:
+    """Registered bonus kinds, sorted."""
+    return sorted(_BONUSES)
 
 
 def make_bonus(
     config: BonusConfig, *, state_columns: list[int], belief, generator: torch.Generator, index: int
 ) -> Bonus:
-    """Builds one bonus component from its config."""
+    """Builds one bonus component from its config (its `kind` names a registered class)."""
     name = f"{index}_{config.kind}_{config.input}"
-    if config.kind in ("rnd", "ensemble_rnd"):
-        if config.kind == "rnd" and config.ensemble_size != 1:
-            raise ValueError("kind 'rnd' has ensemble_size 1; use kind 'ensemble_rnd' for an ensemble")
-        selector = InputSelector(config.input, state_columns, belief.feature_dim)
-        return EnsembleRND(selector, config, generator, name)
-    if config.kind == "vae_error":
-        return VAEErrorBonus(belief, name)
-    raise ValueError(f"unknown bonus kind {config.kind!r}; kinds: {', '.join(BONUSES)}")
+    return bonus_class(config.kind).build(
+        config, state_columns=state_columns, belief=belief, generator=generator, name=name
+    )
+
+
+def _no_params(config: BonusConfig) -> None:
+    if config.params:
+        raise ValueError(f"the {config.kind!r} bonus takes no params; got {', '.join(map(repr, config.params))}")
+
+
+register_bonus("rnd")(EnsembleRND)
+register_bonus("ensemble_rnd")(EnsembleRND)
+register_bonus("vae_error")(VAEErrorBonus)

@@ -123,6 +123,8 @@ class BonusConfig:
     # schedule; 0.5: twice as fast, e.g. a state bonus annealed before the hyper-state one); None: constant,
     # unless AgentConfig.anneal_bonus anneals every bonus over the whole run.
     anneal_until: float | None = None
+    # Fields of a registered bonus of your own (agents.register_bonus), validated by that component.
+    params: dict = dataclasses.field(default_factory=dict)
 
     def __post_init__(self) -> None:
         _check_choice("input_norm", self.input_norm, ("running", "none"))
@@ -137,7 +139,10 @@ class BonusConfig:
 class AgentConfig:
     """A whole agent: PPO + one belief + weighted bonuses."""
 
-    belief: str = "none"  # none | recurrent | oracle | varibad | task_supervised | task_aware
+    # A registered belief component: none | recurrent | oracle | varibad | task_supervised | task_aware, or
+    # one of your own (agents.register_belief), which gets `belief_params`.
+    belief: str = "none"
+    belief_params: dict = dataclasses.field(default_factory=dict)
     ppo: PPOConfig = PPOConfig()
     vae: VAEConfig = VAEConfig()
     recurrent: RecurrentConfig = RecurrentConfig()
@@ -146,7 +151,7 @@ class AgentConfig:
     state_keys: tuple[str, ...] | None = None  # None: every non-privileged observation key
     torch_threads: int = 1
     physics_threads: int = 0  # 0: one per CPU
-    checkpoint_every: int = 10  # iterations
+    checkpoint_every: int = 10  # iterations (0: only at the end and when the caller asks, see Agent.train)
 
 
 def to_dict(config: Any) -> Any:
@@ -207,7 +212,11 @@ def apply_overrides(config: Any, overrides: dict[str, Any], prefix: str = "") ->
             raise ValueError(f"unknown config field {path!r}{hint}; valid: {', '.join(prefix + f for f in fields)}")
         current = getattr(config, name)
         direct = sub.pop("", dataclasses.MISSING)
-        if dataclasses.is_dataclass(current):
+        if isinstance(current, dict):  # a component's own parameters: replaced as a whole, or per key
+            if direct is not dataclasses.MISSING and not isinstance(direct, dict):
+                raise ValueError(f"{path} must be a mapping, got {direct!r}")
+            changes[name] = {**(current if direct is dataclasses.MISSING else direct), **sub}
+        elif dataclasses.is_dataclass(current):
             if direct is not dataclasses.MISSING:
                 raise ValueError(f"{path} is a section; set its fields, e.g. {path}.{next(iter(fields))}")
             changes[name] = apply_overrides(current, sub, prefix=f"{path}.")

@@ -72,6 +72,7 @@ class Policy:
             vae=cfg.vae,
             recurrent=cfg.recurrent,
             generator=self.generator,
+            params=cfg.belief_params,
         )
         if cfg.ppo.minibatch_unit == "transitions" and self.belief.policy_parameters():
             raise ValueError(

@@ -8,6 +8,7 @@ code's ICML configurations instead (see ICML_PPO below).
 from __future__ import annotations
 
 import dataclasses
+import difflib
 
 from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig
 
@@ -61,6 +62,30 @@ PRESETS: dict[str, AgentConfig] = {
 }
 
 
+def register_preset(name: str, config: AgentConfig) -> AgentConfig:
+    """Names an `AgentConfig` (built-in or your own components) so that `agents.make(name)`,
+    `evaluation/run.py --agents name` and `--config` tables use it. Returns the config."""
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"a preset name must be a non-empty string, got {name!r}")
+    if not isinstance(config, AgentConfig):
+        raise TypeError(f"preset {name!r} must be an agents.AgentConfig, got {type(config).__name__}")
+    if name in PRESETS:
+        raise ValueError(f"preset {name!r} is already registered")
+    check_components(config)
+    PRESETS[name] = config
+    return config
+
+
+def check_components(config: AgentConfig) -> None:
+    """ValueError (with did-you-mean) if the config names a belief or bonus kind nobody registered."""
+    from hyperstate.agents.beliefs import belief_class
+    from hyperstate.agents.bonuses import bonus_class
+
+    belief_class(config.belief)
+    for bonus in config.bonuses:
+        bonus_class(bonus.kind)
+
+
 def list_presets() -> list[str]:
     return sorted(PRESETS)
 
@@ -69,4 +94,6 @@ def get_preset(name: str) -> AgentConfig:
     try:
         return PRESETS[name]
     except KeyError:
-        raise ValueError(f"unknown agent preset {name!r}; presets: {', '.join(sorted(PRESETS))}") from None
+        close = difflib.get_close_matches(str(name), PRESETS, n=3)
+        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        raise ValueError(f"unknown agent preset {name!r}{hint}; presets: {', '.join(sorted(PRESETS))}") from None

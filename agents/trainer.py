@@ -272,15 +272,15 @@ class Trainer:
             )
             state.history.append(log)
             state.iteration = iteration + 1
-            if on_iteration is not None:
-                on_iteration(log)
+            asked = on_iteration(log) is True if on_iteration is not None else False
             bar.update(1)
             if log["train_return"] is not None:
                 bar.set_postfix(ret=f"{log['train_return']:.1f}", fps=f"{log['fps']:.0f}")
             done = state.iteration == self.iterations
             stopping = stop_after_iterations is not None and state.iteration - start_iteration >= stop_after_iterations
+            every = self.policy.config.checkpoint_every
             if self.checkpoint is not None and (
-                state.iteration % self.policy.config.checkpoint_every == 0 or done or stopping
+                (every > 0 and state.iteration % every == 0) or done or stopping or asked
             ):
                 self.save_checkpoint(self.checkpoint)
             if stopping:

@@ -25,7 +25,7 @@ import numpy as np
 os.environ.setdefault("MUJOCO_GL", "disable")
 
 from hyperstate import suite
-from hyperstate.agents import Agent
+from hyperstate.evaluation import protocol
 from hyperstate.evaluation.cell import import_modules, load_records, write_json_atomic, write_results
 from hyperstate.evaluation.deploy import certainty_equivalent_metrics, evaluation_tasks, reads_true_task
 from hyperstate.evaluation.probe import belief_quality
@@ -37,7 +37,7 @@ def _certainty_equivalent(record: dict, directory: Path, grid: dict) -> bool:
     agent_path = directory / "agent.pt"
     if "certainty_equivalent" in final or not agent_path.exists():
         return False
-    agent = Agent.load(agent_path)
+    agent = protocol.load_agent(record["agent"], agent_path)
     if not reads_true_task(agent):
         return False
     tasks = evaluation_tasks(record["task"], len(final["online_return_per_task"]))

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import math
 import os
 import platform
 import subprocess
@@ -24,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from hyperstate import agents, suite
-from hyperstate.agents import config as config_lib
+from hyperstate import suite
+from hyperstate.evaluation import protocol
 from hyperstate.evaluation.coverage import HyperStateCoverage
 from hyperstate.evaluation.deploy import (
     certainty_equivalent_metrics,
@@ -52,7 +51,8 @@ class CellSpec:
     resume: bool
     progress: bool = True
     position: int = 0
-    imports: tuple[str, ...] = ()  # user modules that register tasks, imported in the worker first
+    imports: tuple[str, ...] = ()  # user modules that register tasks and agents, imported in the worker first
+    physics_threads: int = 0  # the cores this cell may use for physics (0: all); parallel cells share them
 
     @property
     def cell_id(self) -> str:
@@ -128,14 +128,6 @@ def import_modules(names: tuple[str, ...] | list[str]) -> None:
             importlib.import_module(name)
 
 
-def make_agent(spec: CellSpec):
-    """The cell's agent, with checkpoints aligned to evaluation points (so resume rejoins the curve)."""
-    agent = agents.make(spec.agent, **spec.overrides)
-    per_iteration = agent.config.ppo.num_envs * agent.config.ppo.rollout_length
-    every = max(1, round(spec.eval_every / per_iteration))
-    return agents.make(spec.agent, **{**spec.overrides, "checkpoint_every": every}), every, per_iteration
-
-
 def training_task(spec: CellSpec, agent) -> str:
     """Where the cell's agent learns: the task itself, except that the task-aware reference learns the
     task's dense counterpart where the task declares one (`suite.register(..., reference_task=)`).
@@ -147,10 +139,14 @@ def training_task(spec: CellSpec, agent) -> str:
 
 
 def run_cell(spec: CellSpec) -> dict:
-    """Trains and evaluates one cell; returns its record (also on disk)."""
+    """Trains and evaluates one cell; returns its record (also on disk). The agent is used only through
+    the benchmarkable-agent protocol (evaluation/protocol.py)."""
     import torch  # noqa: F401  (imported here so that worker processes set their own threads)
     from torch.utils.tensorboard import SummaryWriter
 
+    if spec.physics_threads:
+        # Parallel cells share the cores; the suite's batched simulators read this (results do not depend on it).
+        os.environ["HYPERSTATE_PHYSICS_THREADS"] = str(spec.physics_threads)
     import_modules(spec.imports)
     directory = spec.directory
     directory.mkdir(parents=True, exist_ok=True)
@@ -159,15 +155,14 @@ def run_cell(spec: CellSpec) -> dict:
         record = json.loads(record_path.read_text())
         if record.get("complete"):
             return record
-    agent, every, per_iteration = make_agent(spec)
-    iterations = math.ceil(spec.frames / per_iteration)
+    agent = protocol.make_agent(spec.agent, **spec.overrides)
     record = {
         "agent": spec.agent,
         "task": spec.task,
         "seed": spec.seed,
-        "frames": iterations * per_iteration,
+        "frames": spec.frames,
         "trained_on": training_task(spec, agent),
-        "config": config_lib.to_dict(agent.config),
+        "config": protocol.describe(agent),
         "curve": [],
         "final": None,
         "versions": versions(),
@@ -207,23 +202,34 @@ def run_cell(spec: CellSpec) -> dict:
         writer.add_scalar("eval/online_return", point["online_return"], frames)
         return metrics
 
-    def on_iteration(log: dict) -> None:
-        frames = log["frames"]
+    def due(frames: int) -> bool:
+        """An evaluation point: the first report in each eval_every-frames interval, and the last one."""
+        bucket = frames // spec.eval_every
+        done = any(p["frames"] // spec.eval_every == bucket and p["frames"] <= frames for p in record["curve"])
+        final_done = bool(record["curve"]) and record["curve"][-1]["frames"] == frames
+        return (bucket >= 1 and not done) or (frames >= spec.frames and not final_done)
+
+    def on_iteration(log: dict) -> bool:
+        frames = int(log["frames"])
         for key, value in log.items():
             if key.startswith("reward_share/"):
                 shares.setdefault(key, []).append(value)
             if isinstance(value, float) and key not in ("wall_seconds",):
                 writer.add_scalar(key if "/" in key else f"train/{key}", value, frames)
-        if log["iteration"] % every == 0 or log["iteration"] == iterations:
-            evaluate(frames)
-            # The agent at every evaluation point, for diagnostics through training (bonus heat maps).
-            (directory / "snapshots").mkdir(exist_ok=True)
-            agent.save(directory / "snapshots" / f"agent_{frames:09d}.pt")
-            np.save(coverage_path, coverage.visited)
-            write_json_atomic(record_path, record)
+        if not due(frames):
+            return False
+        evaluate(frames)
+        # The agent at every evaluation point, for diagnostics through training (bonus heat maps).
+        (directory / "snapshots").mkdir(exist_ok=True)
+        agent.save(directory / "snapshots" / f"agent_{frames:09d}.pt")
+        np.save(coverage_path, coverage.visited)
+        write_json_atomic(record_path, record)
+        return True  # checkpoint now: a resumed run rejoins the curve here
 
-    agent.name = f"{spec.agent} seed {spec.seed}"
-    agent.train(
+    if hasattr(agent, "name"):
+        agent.name = f"{spec.agent} seed {spec.seed}"
+    protocol.train(
+        agent,
         record["trained_on"],
         spec.frames,
         spec.seed,
@@ -233,6 +239,7 @@ def run_cell(spec: CellSpec) -> dict:
         on_iteration=on_iteration,
         on_rollout=lambda obs: coverage.update(obs) if coverage.applies_to(obs) else None,
     )
+    record["frames"] = int(getattr(agent, "total_frames", spec.frames))
     final = deploy(agent, spec.task, tasks, spec.episodes_per_task)
     record["final"] = deployment_metrics(final, spec.task, probe=True)
     # The stochastic policy (sampled actions, fixed seed) next to the deterministic one.

@@ -72,11 +72,9 @@ class CertaintyEquivalent:
 
 
 def reads_true_task(agent) -> bool:
-    """Whether `agent`'s policy is conditioned on the true task (the task-aware reference); answers
-    from its belief component's class, so before training too."""
-    from hyperstate.agents.beliefs import belief_class
-
-    return bool(belief_class(agent.config.belief).reads_true_task)
+    """Whether `agent`'s policy is conditioned on the true task (a task-aware reference, not a
+    meta-learner): its optional `reads_true_task` attribute (evaluation/protocol.py)."""
+    return bool(getattr(agent, "reads_true_task", False))
 
 
 def certainty_equivalent_metrics(
@@ -121,7 +119,9 @@ def _deploy(agent, task, tasks, episodes_per_task, seed, deterministic) -> Deplo
         action, state = agent.act(
             out.observation, state, deterministic=deterministic, reward=None if state is None else out.reward
         )
-        features.append(agent.belief_features(state))
+        # Agents without belief features (an optional part of the protocol) give the probe nothing.
+        has_features = hasattr(agent, "belief_features")
+        features.append(agent.belief_features(state) if has_features else np.zeros((len(tasks), 0)))
         out = env.step(action)
         rewards.append(out.reward)
         observations.append(out.final_observation)

@@ -20,23 +20,25 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from hyperstate import suite
-from hyperstate.agents import Agent
+from hyperstate.evaluation import protocol
 from hyperstate.evaluation.deploy import Deployment, deploy, evaluation_tasks
 
 # Positions at which the bonus is evaluated, as a multiple of the farthest position deployments reach.
 GRID_POINTS = 121
 
 
-def position_key(task: str, agent: Agent) -> str | None:
-    """The task's first declared position key, if it is one number the agent observes; else None."""
+def position_key(task: str) -> str | None:
+    """The task's first declared position key, if it is one number (such as cheetah's x); else None."""
     keys = suite.position_keys(task) or ()
-    if not keys or keys[0] not in agent.obs_spec or int(np.prod(agent.obs_spec[keys[0]][0])) != 1:
+    if not keys:
         return None
-    return keys[0]
+    spec = suite.load(task, seed=0).observation_spec()
+    return keys[0] if keys[0] in spec and int(np.prod(spec[keys[0]].shape)) == 1 else None
 
 
 def belief_values(deployment: Deployment) -> tuple[list[str], np.ndarray]:
@@ -47,7 +49,7 @@ def belief_values(deployment: Deployment) -> tuple[list[str], np.ndarray]:
     return labels, features
 
 
-def landscape(agent: Agent, template: dict[str, np.ndarray], key: str, xs: np.ndarray, features: np.ndarray) -> dict:
+def landscape(agent: Any, template: dict[str, np.ndarray], key: str, xs: np.ndarray, features: np.ndarray) -> dict:
     """{bonus name: (len(features), len(xs)) bonus values} at position xs under each belief feature row,
     the rest of the observation taken from `template` (one observation)."""
     rows, cols = len(features), len(xs)
@@ -57,7 +59,7 @@ def landscape(agent: Agent, template: dict[str, np.ndarray], key: str, xs: np.nd
     return {name: v.reshape(rows, cols) for name, v in values.items()}
 
 
-def along_deployment(agent: Agent, deployment: Deployment, key: str, xs: np.ndarray) -> dict:
+def along_deployment(agent: Any, deployment: Deployment, key: str, xs: np.ndarray) -> dict:
     """{bonus name: (M, T, len(xs))}: the bonus over x under the belief each deployment had at each step."""
     steps, m = deployment.rewards.shape
     template = {k: v[0, :1] for k, v in deployment.observations.items()}
@@ -83,15 +85,17 @@ def cell_diagnostics(out: Path, cell: str, tasks_per_value: int = 1) -> Path | N
         return None
     # A cell still training has no agent.pt yet: its latest snapshot stands in for the final agent.
     final_path = directory / "agent.pt" if (directory / "agent.pt").exists() else snapshots[-1]
-    task = cell.split("__")[1]
-    final = Agent.load(final_path)
-    key = position_key(task, final)
+    name, task = cell.split("__")[:2]
+    final = protocol.load_agent(name, final_path)
+    if not (hasattr(final, "bonus_values") and hasattr(final, "belief_features")):
+        return None  # not an agent of bonus components: nothing to draw
+    key = position_key(task)
     if key is None or not final.bonus_values(*_probe_input(final, task)):
         return None
     support = suite.task_prior(task).support()
     held_out = evaluation_tasks(task, max(2, 0 if support is None else len(support)) * tasks_per_value)
     final_run = deploy(final, task, held_out)
-    checkpoints = [(int(path.stem.split("_")[1]), Agent.load(path)) for path in snapshots]
+    checkpoints = [(int(path.stem.split("_")[1]), protocol.load_agent(name, path)) for path in snapshots]
     runs = [deploy(agent, task, held_out) for _, agent in checkpoints]
     # Wide enough for every position any checkpoint's deployments reached, and twice the zone.
     reach = max(float(np.abs(run.observations[key]).max()) for run in [final_run, *runs])
@@ -120,10 +124,10 @@ def cell_diagnostics(out: Path, cell: str, tasks_per_value: int = 1) -> Path | N
     return _draw(out, cell, task, names, xs, np.array(frames), labels, through_training, along, final_run, key, zone)
 
 
-def _probe_input(agent: Agent, task: str) -> tuple[dict, np.ndarray]:
+def _probe_input(agent: Any, task: str) -> tuple[dict, np.ndarray]:
     env = suite.batch(task, 1, seed=0, privileged=True, num_threads=1)
     obs = env.reset().observation
-    state = agent.initial_state(obs)
+    _, state = agent.act(obs)
     return obs, agent.belief_features(state)
 
 

@@ -25,6 +25,7 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "disable")
 
 from hyperstate import agents, suite
+from hyperstate.evaluation import protocol
 from hyperstate.evaluation.cell import (
     CellSpec,
     import_modules,
@@ -45,7 +46,11 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         prog="evaluation/run.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     p.add_argument(
-        "--agents", nargs="+", required=True, metavar="A", help=f"agent presets: {', '.join(agents.list_presets())}"
+        "--agents",
+        nargs="+",
+        required=True,
+        metavar="A",
+        help=f"agents: presets ({', '.join(agents.list_presets())}) or agents registered by --import modules",
     )
     p.add_argument("--tasks", nargs="+", required=True, metavar="T", help=f"tasks: {', '.join(suite.TASKS)}")
     p.add_argument("--seeds", nargs="+", type=int, default=[0], metavar="S", help="training seeds (default: 0)")
@@ -165,8 +170,10 @@ def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
         if name not in suite.TASKS:
             raise UsageError(f"unknown task {name!r}; tasks: {', '.join(suite.TASKS)}")
     for name in args.agents:
-        if name not in agents.PRESETS:
-            raise UsageError(f"unknown agent {name!r}; presets: {', '.join(agents.list_presets())}")
+        try:
+            protocol.check_name(name)
+        except ValueError as e:
+            raise UsageError(str(e)) from None
     if args.eval_tasks < 1 or (args.eval_every is not None and args.eval_every < 1):
         raise UsageError("--eval-tasks and --eval-every must be positive")
     if args.video_tasks < 1:
@@ -176,15 +183,15 @@ def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
     config = load_config_file(args.config)
     names = list(dict.fromkeys(args.agents + ([] if args.no_reference else [REFERENCE_AGENT])))
     # Tables for presets outside this grid are fine (one file can serve several grids); other names are typos.
-    unknown = set(config) - set(agents.PRESETS) - {"all"}
+    unknown = set(config) - set(protocol.agent_names()) - {"all"}
     if unknown:
-        raise UsageError(f"--config has tables for unknown presets: {', '.join(sorted(unknown))}")
+        raise UsageError(f"--config has tables for unknown agents: {', '.join(sorted(unknown))}")
     overrides = {}
     for name in names:
         merged = {**config.get("all", {}), **config.get(name, {})}
         try:
-            agents.make(name, **merged)
-        except ValueError as e:
+            protocol.make_agent(name, **merged)
+        except (ValueError, TypeError) as e:
             raise UsageError(f"--config for {name}: {e}") from None
         overrides[name] = merged
     return names, overrides
@@ -197,7 +204,7 @@ def incompatible_cells(args: argparse.Namespace, names: list[str], overrides: di
     for task in args.tasks:
         for name in names:
             try:
-                agents.make(name, **overrides[name]).check_task(task, task_kwargs)
+                protocol.check_task(protocol.make_agent(name, **overrides[name]), task, task_kwargs)
             except ValueError as e:
                 skipped[(name, task)] = str(e)
     return skipped
@@ -303,7 +310,7 @@ def write_diagnostics(out: Path, records: list[dict]) -> None:
     from hyperstate.evaluation.diagnostics import cell_diagnostics
 
     for record in records:
-        if not record.get("complete") or not any(b["kind"] != "vae_error" for b in record["config"]["bonuses"]):
+        if not record.get("complete"):
             continue
         cell = f"{record['agent']}__{record['task']}__s{record['seed']}"
         try:
@@ -358,10 +365,6 @@ def main(argv: list[str] | None = None) -> int:
     specs = []
     cells = [(n, t, s) for t in args.tasks for n in names for s in args.seeds if (n, t) not in skipped]
     for i, (name, task, seed) in enumerate(cells):
-        agent_overrides = dict(overrides[name])
-        if args.executor == "local" and workers > 1:
-            # Parallel cells share the cores: give each cell's physics its share.
-            agent_overrides.setdefault("physics_threads", cells_per_worker_threads)
         specs.append(
             CellSpec(
                 name,
@@ -371,12 +374,14 @@ def main(argv: list[str] | None = None) -> int:
                 eval_every,
                 args.eval_tasks,
                 args.episodes_per_task,
-                agent_overrides,
+                dict(overrides[name]),
                 str(args.out),
                 args.resume,
                 not args.no_progress,
                 i + 1,
                 tuple(args.imports),
+                # Parallel cells share the cores: each cell's physics gets its share.
+                physics_threads=cells_per_worker_threads if args.executor == "local" and workers > 1 else 0,
             )
         )
     started = time.perf_counter()

@@ -25,7 +25,8 @@ import mujoco
 import numpy as np
 from PIL import Image, ImageDraw
 
-from hyperstate import agents, suite
+from hyperstate import suite
+from hyperstate.evaluation import protocol
 from hyperstate.evaluation.cell import import_modules
 from hyperstate.evaluation.deploy import EVAL_SEED, evaluation_tasks
 
@@ -65,7 +66,7 @@ def _caption(frame: np.ndarray, lines: list[str]) -> np.ndarray:
 
 
 def render_deployment(
-    agent: agents.Agent,
+    agent,
     task: str,
     path: str | os.PathLike,
     *,
@@ -106,7 +107,7 @@ def render_deployment(
     return {"return": float(np.mean(returns)), "returns": returns, "frames": frames, "fps": fps}
 
 
-def _render_one(agent: agents.Agent, task: str, env, writer, width: int, height: int) -> tuple[float, int]:
+def _render_one(agent, task: str, env, writer, width: int, height: int) -> tuple[float, int]:
     """One deployment from reset into `writer`; returns (return, frames written)."""
     step = env.reset()
     state, total, t, frames = None, 0.0, 0, 0
@@ -179,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         if not saved.exists():
             print(f"evaluation/video.py: no trained agent for {cell} (skipped)", file=sys.stderr)
             continue
-        agent = agents.Agent.load(saved)
+        agent = protocol.load_agent(cell.split("__")[0], saved)
         task = cell.split("__")[1]
         path = args.out / "videos" / f"{cell}.mp4"
         info = render_deployment(

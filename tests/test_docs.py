@@ -1,11 +1,13 @@
 """docs/new_task.md's example runs as written: registered from the user's own file, then benchmarked."""
 
+import csv
 import json
 import re
 import sys
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from hyperstate import suite
 
@@ -47,3 +49,99 @@ def test_new_task_example_registers_trains_and_benchmarks(tmp_path):
         if "line_goal_sparse" in suite.TASKS:
             suite.unregister("line_goal_sparse")
         sys.modules.pop("my_tasks", None)
+
+
+def _agent_doc_blocks() -> tuple[list[str], list[list[str]]]:
+    text = (ROOT / "docs" / "new_agent.md").read_text()
+    code = re.findall(r"```python\n(.*?)```", text, re.S)
+    commands = [c.replace("\\\n", " ").split() for c in re.findall(r"```bash\n(.*?)```", text, re.S)]
+    return code, commands
+
+
+def _tiny(args: list[str], module: Path, out: Path, config: Path) -> list[str]:
+    args = list(args)
+    args[args.index("--import") + 1] = str(module)
+    args[args.index("--frames") + 1] = "512"
+    args[args.index("--out") + 1] = str(out)
+    seeds = args.index("--seeds")
+    args[seeds + 1 : seeds + 4] = ["0"]
+    if "--config" in args:
+        args[args.index("--config") + 1] = str(config)
+    else:
+        args += ["--config", str(config)]
+    return [*args, "--eval-tasks", "2", "--eval-every", "256", "--no-progress"]
+
+
+TINY_PRESET = '"ppo.num_envs" = 4\n"ppo.rollout_length" = 64\n'
+
+
+def test_user_bonus_example_registers_and_benchmarks(tmp_path):
+    from hyperstate.evaluation.run import main
+
+    (code, _), (command, _) = _agent_doc_blocks()
+    assert len(code.strip().splitlines()) <= 40
+    module = tmp_path / "my_bonus.py"
+    module.write_text(code)
+    config = tmp_path / "tiny.toml"
+    config.write_text(f'[all]\n{TINY_PRESET}[oracle_count]\n"bonuses.0.params.bin_width" = 1.0\n')
+    assert command[:2] == [".venv/bin/python", "evaluation/run.py"]
+    try:
+        assert main(_tiny(command[2:], module, tmp_path / "out", config)) == 0
+        records = json.loads((tmp_path / "out" / "results.json").read_text())
+        assert {r["agent"] for r in records} == {"oracle_count", "oracle_rh", "task_aware"}
+        count = next(r for r in records if r["agent"] == "oracle_count")
+        assert count["config"]["bonuses"][0] == {**count["config"]["bonuses"][0], "kind": "count"}
+        assert count["config"]["bonuses"][0]["params"] == {"bin_width": 1.0}  # the --config table reached it
+        assert count["complete"] and [p["frames"] for p in count["curve"]] == [256, 512]
+        assert "reward_share" in count["curve"][0]  # the harness treats it as any bonus
+        # The bonus itself: fewer visits, larger bonus; a saved agent carries its counts.
+        from hyperstate import agents
+
+        agent = agents.Agent.load(tmp_path / "out" / "cells" / "oracle_count__cheetah_dir_sparse__s0" / "agent.pt")
+        (bonus,) = agent.bonuses
+        assert bonus.counts.sum() == 512 and bonus.counts[bonus.bins // 2 - 3 : bonus.bins // 2 + 3].sum() > 0
+        with pytest.raises(ValueError, match="bin_width > 0 only"):
+            agents.make("oracle_count", **{"bonuses.0.params.bin_widht": 1.0}).check_task("cheetah_dir_sparse")
+    finally:
+        from hyperstate import agents
+        from hyperstate.agents import bonuses as bonus_registry
+
+        agents.PRESETS.pop("oracle_count", None)
+        bonus_registry._BONUSES.pop("count", None)
+        sys.modules.pop("my_bonus", None)
+
+
+def test_external_agent_example_benchmarks_next_to_oracle(tmp_path):
+    from hyperstate.evaluation import protocol
+    from hyperstate.evaluation.run import main
+
+    (_, code), (_, command) = _agent_doc_blocks()
+    assert len(code.strip().splitlines()) <= 60
+    module = tmp_path / "my_agent.py"
+    module.write_text(code)
+    config = tmp_path / "my_agents.toml"
+    config.write_text(f"[sb3_ppo]\nn_steps = 128\nbatch_size = 64\n[oracle]\n{TINY_PRESET}[task_aware]\n{TINY_PRESET}")
+    args = _tiny(command[2:], module, tmp_path / "out", config)
+    try:
+        # Two workers: spawned processes import the user's file themselves.
+        assert main([*args, "--workers", "2"]) == 0
+        records = json.loads((tmp_path / "out" / "results.json").read_text())
+        assert {r["agent"] for r in records} == {"sb3_ppo", "oracle", "task_aware"}
+        sb3 = next(r for r in records if r["agent"] == "sb3_ppo")
+        assert sb3["complete"] and [p["frames"] for p in sb3["curve"]] == [256, 512]
+        assert len(sb3["final"]["online_return_per_task"]) == 2 and "left_zone" in sb3["final"]
+        rows = list(csv.DictReader((tmp_path / "out" / "summary.csv").open()))
+        assert {r["agent"] for r in rows} == {"sb3_ppo", "oracle", "task_aware"}
+        assert next(r for r in rows if r["agent"] == "sb3_ppo")["regret"] != ""
+        # Its saved agent reloads through its own loader and acts on the harness's batched observations.
+        saved = tmp_path / "out" / "cells" / "sb3_ppo__cheetah_dir_sparse__s0" / "agent.pt"
+        agent = protocol.load_agent("sb3_ppo", saved)
+        obs = suite.batch("cheetah_dir_sparse", 3, seed=0, privileged=True).reset().observation
+        action, state = agent.act(obs)
+        assert action.shape == (3, 6) and state is None
+        # Resuming the finished grid keeps it.
+        assert main([*args, "--resume"]) == 0
+    finally:
+        if "sb3_ppo" in protocol.agent_names():
+            protocol.unregister_agent("sb3_ppo")
+        sys.modules.pop("my_agent", None)

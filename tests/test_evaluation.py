@@ -207,7 +207,7 @@ def test_bad_config_field_and_foreign_out_dir(tmp_path, tiny_config):
     proc = run(
         ["--agents", "oracle", "--tasks", "cheetah_dir", "--frames", 100, "--config", typo, "--out", tmp_path / "o"]
     )
-    assert proc.returncode == 2 and "unknown presets: orcale" in proc.stderr
+    assert proc.returncode == 2 and "unknown agents: orcale" in proc.stderr
     out = tmp_path / "grid"
     grid = f"--agents oracle --tasks cheetah_dir --config {tiny_config} --no-reference --eval-tasks 2 --out {out}"
     args = [*grid.split(), "--no-progress", "--frames", "200"]
@@ -256,15 +256,21 @@ def test_sigkill_then_resume_equals_uninterrupted_run(tmp_path, tiny_config):
     assert strip_times(again) == strip_times(whole)
 
 
-def test_ray_executor_runs_a_tiny_grid(tmp_path, tiny_config):
+def test_ray_executor_runs_a_tiny_grid_of_a_user_registered_preset(tmp_path, tiny_config):
+    """Ray workers import the user's file (--import) themselves, so its registrations reach them."""
+    user = tmp_path / "user_presets.py"
+    user.write_text(
+        'from hyperstate import agents\nagents.register_preset("user_oracle", agents.get_preset("oracle"))\n'
+    )
     out = tmp_path / "ray"
     proc = run(
-        "--agents oracle --tasks cheetah_dir --seeds 0 1 --frames 200 --eval-tasks 2 --no-reference "
-        f"--config {tiny_config} --executor ray --out {out} --no-progress".split()
+        f"--import {user} --agents user_oracle --tasks cheetah_dir --seeds 0 1 --frames 200 --eval-tasks 2 "
+        f"--no-reference --config {tiny_config} --executor ray --out {out} --no-progress".split()
     )
     assert proc.returncode == 0, proc.stderr[-2000:]
     records = json.loads((out / "results.json").read_text())
     assert sorted(r["seed"] for r in records) == [0, 1] and all(r["complete"] for r in records)
+    assert {r["agent"] for r in records} == {"user_oracle"}
 
 
 # Beyond the paper: coverage, belief probe, Bayes-optimal estimate -----------------------------------
