@@ -15,7 +15,6 @@ from a prior at the start of each BAMDP episode and is updated with each transit
 from __future__ import annotations
 
 import dataclasses
-import difflib
 from collections.abc import Callable
 from typing import Protocol
 
@@ -25,6 +24,7 @@ from torch import nn
 from torch.nn import functional as F
 
 from hyperstate.agents.config import RecurrentConfig, VAEConfig
+from hyperstate.agents.naming import unknown_name
 from hyperstate.agents.networks import mlp
 from hyperstate.agents.rollout import Rollout
 
@@ -523,12 +523,9 @@ def register_belief(name: str) -> Callable[[type], type]:
 
 def belief_class(name: str) -> type:
     """The belief component registered as `name` (its capabilities are class attributes)."""
-    try:
-        return _BELIEFS[name]
-    except KeyError:
-        close = difflib.get_close_matches(str(name), _BELIEFS, n=3)
-        hint = f" (did you mean {', '.join(close)}?)" if close else ""
-        raise ValueError(f"unknown belief {name!r}{hint}; beliefs: {', '.join(list_beliefs())}") from None
+    if name not in _BELIEFS:
+        raise unknown_name("belief", name, _BELIEFS, "beliefs")
+    return _BELIEFS[name]
 
 
 def list_beliefs() -> list[str]:

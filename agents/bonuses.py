@@ -8,7 +8,6 @@ bonus per transition; its weight, normalisation and annealing live in the agent 
 from __future__ import annotations
 
 import dataclasses
-import difflib
 from collections.abc import Callable
 from typing import Protocol
 
@@ -17,6 +16,7 @@ import torch
 from torch import nn
 
 from hyperstate.agents.config import BonusConfig
+from hyperstate.agents.naming import unknown_name
 from hyperstate.agents.networks import mlp
 from hyperstate.agents.normalization import RunningMeanStd
 
@@ -280,12 +280,9 @@ def register_bonus(kind: str) -> Callable[[type], type]:
 
 def bonus_class(kind: str) -> type:
     """The bonus component registered as `kind`."""
-    try:
-        return _BONUSES[kind]
-    except KeyError:
-        close = difflib.get_close_matches(str(kind), _BONUSES, n=3)
-        hint = f" (did you mean {', '.join(close)}?)" if close else ""
-        raise ValueError(f"unknown bonus kind {kind!r}{hint}; kinds: {', '.join(list_bonuses())}") from None
+    if kind not in _BONUSES:
+        raise unknown_name("bonus kind", kind, _BONUSES, "kinds")
+    return _BONUSES[kind]
 
 
 def list_bonuses() -> list[str]:

@@ -8,9 +8,9 @@ code's ICML configurations instead (see ICML_PPO below).
 from __future__ import annotations
 
 import dataclasses
-import difflib
 
 from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig
+from hyperstate.agents.naming import unknown_name
 
 STATE_BONUS = BonusConfig(input="state")  # state_keys="task": the task's position keys
 HYPERSTATE_BONUS = BonusConfig(input="hyperstate")
@@ -91,9 +91,6 @@ def list_presets() -> list[str]:
 
 
 def get_preset(name: str) -> AgentConfig:
-    try:
-        return PRESETS[name]
-    except KeyError:
-        close = difflib.get_close_matches(str(name), PRESETS, n=3)
-        hint = f" (did you mean {', '.join(close)}?)" if close else ""
-        raise ValueError(f"unknown agent preset {name!r}{hint}; presets: {', '.join(sorted(PRESETS))}") from None
+    if name not in PRESETS:
+        raise unknown_name("agent preset", name, PRESETS, "presets")
+    return PRESETS[name]

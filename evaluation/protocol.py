@@ -32,7 +32,6 @@ An agent has:
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import inspect
 import os
 from collections.abc import Callable
@@ -41,6 +40,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from hyperstate import agents
+from hyperstate.agents.naming import unknown_name
 
 
 class BenchmarkAgent(Protocol):
@@ -98,9 +98,7 @@ def agent_names() -> list[str]:
 def check_name(name: str) -> None:
     """ValueError with a did-you-mean if nobody registered `name`."""
     if name not in _AGENTS and name not in agents.PRESETS:
-        close = difflib.get_close_matches(str(name), agent_names(), n=3)
-        hint = f" (did you mean {', '.join(close)}?)" if close else ""
-        raise ValueError(f"unknown agent {name!r}{hint}; agents: {', '.join(agent_names())}")
+        raise unknown_name("agent", name, agent_names(), "agents")
 
 
 def make_agent(name: str, **overrides: Any) -> BenchmarkAgent:
