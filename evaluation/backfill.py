@@ -25,16 +25,16 @@ import numpy as np
 os.environ.setdefault("MUJOCO_GL", "disable")
 
 from hyperstate import suite
-from hyperstate.evaluation import protocol
+from hyperstate.evaluation import grid, protocol
 from hyperstate.evaluation.cell import import_modules, load_records, write_json_atomic, write_results
 from hyperstate.evaluation.deploy import certainty_equivalent_metrics, evaluation_tasks, reads_true_task
 from hyperstate.evaluation.probe import belief_quality
 from hyperstate.evaluation.report import write_figures, write_summary
 
 
-def _certainty_equivalent(record: dict, directory: Path, grid: dict) -> bool:
+def _certainty_equivalent(record: dict, directory: Path, arguments: dict) -> bool:
     final = record["final"]
-    agent_path = directory / "agent.pt"
+    agent_path = directory / grid.AGENT
     if "certainty_equivalent" in final or not agent_path.exists():
         return False
     agent = protocol.load_agent(record["agent"], agent_path)
@@ -42,14 +42,14 @@ def _certainty_equivalent(record: dict, directory: Path, grid: dict) -> bool:
         return False
     tasks = evaluation_tasks(record["task"], len(final["online_return_per_task"]))
     final["certainty_equivalent"] = certainty_equivalent_metrics(
-        agent, record["task"], tasks, grid.get("episodes_per_task")
+        agent, record["task"], tasks, arguments.get("episodes_per_task")
     )
     return True
 
 
 def _probe_per_step(record: dict, directory: Path) -> bool:
     final = record["final"]
-    npz = directory / "deployment.npz"
+    npz = directory / grid.DEPLOYMENT
     if "probe_kl_per_step" in final or "probe_kl" not in final or not npz.exists():
         return False
     data = np.load(npz)
@@ -65,15 +65,15 @@ def _probe_per_step(record: dict, directory: Path) -> bool:
 
 def backfill(out: Path) -> list[str]:
     """Fills in the finished cells of `out`; returns '<cell>: <what>' for everything it added."""
-    grid = json.loads((out / "grid.json").read_text()) if (out / "grid.json").exists() else {}
+    arguments = json.loads((out / grid.GRID).read_text()) if (out / grid.GRID).exists() else {}
     added = []
-    for record_path in sorted((out / "cells").glob("*/record.json")):
+    for record_path in sorted((out / grid.CELLS).glob(f"*/{grid.RECORD}")):
         record = json.loads(record_path.read_text())
         if not record.get("complete") or record.get("final") is None:
             continue
         directory = record_path.parent
         what = []
-        if _certainty_equivalent(record, directory, grid):
+        if _certainty_equivalent(record, directory, arguments):
             what.append("certainty_equivalent")
         if _probe_per_step(record, directory):
             what.append("probe per step")
@@ -95,7 +95,7 @@ def main(argv: list[str] | None = None) -> int:
         "--import", dest="imports", nargs="+", default=[], metavar="MODULE", help="modules registering tasks"
     )
     args = p.parse_args(argv)
-    if not (args.out / "cells").is_dir():
+    if not (args.out / grid.CELLS).is_dir():
         p.error(f"{args.out} has no cells/ (not an evaluation/run.py output directory)")
     import_modules(args.imports)
     added = backfill(args.out)

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from hyperstate import suite
-from hyperstate.evaluation import protocol
+from hyperstate.evaluation import grid, protocol
 from hyperstate.evaluation.coverage import HyperStateCoverage
 from hyperstate.evaluation.deploy import (
     certainty_equivalent_metrics,
@@ -56,11 +56,11 @@ class CellSpec:
 
     @property
     def cell_id(self) -> str:
-        return f"{self.agent}__{self.task}__s{self.seed}"
+        return grid.cell_id(self.agent, self.task, self.seed)
 
     @property
     def directory(self) -> Path:
-        return Path(self.out) / "cells" / self.cell_id
+        return grid.cell_dir(Path(self.out), self.cell_id)
 
 
 def write_json_atomic(path: Path, data: Any) -> None:
@@ -150,7 +150,7 @@ def run_cell(spec: CellSpec) -> dict:
     import_modules(spec.imports)
     directory = spec.directory
     directory.mkdir(parents=True, exist_ok=True)
-    record_path = directory / "record.json"
+    record_path = directory / grid.RECORD
     if spec.resume and record_path.exists():
         record = json.loads(record_path.read_text())
         if record.get("complete"):
@@ -172,11 +172,11 @@ def run_cell(spec: CellSpec) -> dict:
         record["curve"] = json.loads(record_path.read_text())["curve"]
     tasks = evaluation_tasks(spec.task, spec.eval_tasks)
     coverage = HyperStateCoverage()
-    coverage_path = directory / "coverage.npy"
+    coverage_path = directory / grid.COVERAGE
     if spec.resume and coverage_path.exists():
         # Cells are a set: replaying iterations after the checkpoint marks the same cells again.
         coverage.visited = np.load(coverage_path)
-    writer = SummaryWriter(log_dir=str(Path(spec.out) / "tb" / spec.cell_id))
+    writer = SummaryWriter(log_dir=str(Path(spec.out) / grid.TENSORBOARD / spec.cell_id))
     started = time.perf_counter() - (record["curve"][-1]["wall_seconds"] if record["curve"] else 0.0)
 
     shares: dict[str, list[float]] = {}  # reward-stream shares of the iterations since the last point
@@ -220,8 +220,9 @@ def run_cell(spec: CellSpec) -> dict:
             return False
         evaluate(frames)
         # The agent at every evaluation point, for diagnostics through training (bonus heat maps).
-        (directory / "snapshots").mkdir(exist_ok=True)
-        agent.save(directory / "snapshots" / f"agent_{frames:09d}.pt")
+        snapshot = grid.snapshot_path(Path(spec.out), spec.cell_id, frames)
+        snapshot.parent.mkdir(exist_ok=True)
+        agent.save(snapshot)
         np.save(coverage_path, coverage.visited)
         write_json_atomic(record_path, record)
         return True  # checkpoint now: a resumed run rejoins the curve here
@@ -251,14 +252,14 @@ def run_cell(spec: CellSpec) -> dict:
             agent, spec.task, tasks, spec.episodes_per_task
         )
     np.savez_compressed(
-        directory / "deployment.npz",
+        directory / grid.DEPLOYMENT,
         rewards=final.rewards,
         tasks=final.tasks,
         inner_episode=final.inner_episode,
         features=final.features,
         **{f"obs_{k}": v for k, v in final.observations.items()},
     )
-    agent.save(directory / "agent.pt")
+    agent.save(directory / grid.AGENT)
     record["complete"] = True
     write_json_atomic(record_path, record)
     writer.close()
@@ -268,7 +269,7 @@ def run_cell(spec: CellSpec) -> dict:
 def load_records(out: Path) -> list[dict]:
     """All cell records under `out`, in a stable order."""
     records = []
-    for path in sorted((out / "cells").glob("*/record.json")):
+    for path in sorted((out / grid.CELLS).glob(f"*/{grid.RECORD}")):
         try:
             records.append(json.loads(path.read_text()))
         except (OSError, json.JSONDecodeError):
@@ -278,4 +279,4 @@ def load_records(out: Path) -> list[dict]:
 
 def write_results(out: Path) -> None:
     """`OUT/results.json`: one record per cell (the contract), written atomically."""
-    write_json_atomic(out / "results.json", load_records(out))
+    write_json_atomic(out / grid.RESULTS, load_records(out))

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from hyperstate import suite
-from hyperstate.evaluation import protocol
+from hyperstate.evaluation import grid, protocol
 from hyperstate.evaluation.deploy import Deployment, deploy, evaluation_tasks
 
 # Positions at which the bonus is evaluated, as a multiple of the farthest position deployments reach.
@@ -79,13 +79,13 @@ def _normalised(values: np.ndarray) -> np.ndarray:
 def cell_diagnostics(out: Path, cell: str, tasks_per_value: int = 1) -> Path | None:
     """Computes and draws one cell's bonus landscape; returns the figure's path, or None where the cell
     has no evaluable bonus, no snapshots, or no one-number position."""
-    directory = out / "cells" / cell
-    snapshots = sorted((directory / "snapshots").glob("agent_*.pt"))
+    directory = grid.cell_dir(out, cell)
+    snapshots = grid.snapshots(out, cell)
     if not snapshots:
         return None
     # A cell still training has no agent.pt yet: its latest snapshot stands in for the final agent.
-    final_path = directory / "agent.pt" if (directory / "agent.pt").exists() else snapshots[-1]
-    name, task = cell.split("__")[:2]
+    final_path = directory / grid.AGENT if (directory / grid.AGENT).exists() else snapshots[-1][1]
+    name, task, _ = grid.parse_cell_id(cell)
     final = protocol.load_agent(name, final_path)
     if not (hasattr(final, "bonus_values") and hasattr(final, "belief_features")):
         return None  # not an agent of bonus components: nothing to draw
@@ -95,7 +95,7 @@ def cell_diagnostics(out: Path, cell: str, tasks_per_value: int = 1) -> Path | N
     support = suite.task_prior(task).support()
     held_out = evaluation_tasks(task, max(2, 0 if support is None else len(support)) * tasks_per_value)
     final_run = deploy(final, task, held_out)
-    checkpoints = [(int(path.stem.split("_")[1]), protocol.load_agent(name, path)) for path in snapshots]
+    checkpoints = [(frames, protocol.load_agent(name, path)) for frames, path in snapshots]
     runs = [deploy(agent, task, held_out) for _, agent in checkpoints]
     # Wide enough for every position any checkpoint's deployments reached, and twice the zone.
     reach = max(float(np.abs(run.observations[key]).max()) for run in [final_run, *runs])
@@ -187,7 +187,7 @@ def _draw(out, cell, task, names, xs, frames, labels, through_training, along, r
             ax.set_xlabel("step of the BAMDP episode")
             ax.set_ylabel(f"{key} (red: deployed)")
     fig.suptitle(f"bonus landscape of {cell}", fontsize=10)
-    figures = out / "figures"
+    figures = out / grid.FIGURES
     figures.mkdir(parents=True, exist_ok=True)
     path = figures / f"bonus_{cell}.png"
     fig.savefig(path, dpi=90)
@@ -204,7 +204,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--import", dest="imports", nargs="+", default=[], metavar="MODULE")
     args = parser.parse_args(argv)
     import_modules(args.imports)
-    cells = args.cells or sorted(p.name for p in (args.out / "cells").iterdir() if p.is_dir())
+    cells = args.cells or grid.cell_ids(args.out)
     for cell in cells:
         path = cell_diagnostics(args.out, cell)
         print(f"{cell}: {path if path is not None else 'no bonus landscape (no evaluable bonus or snapshots)'}")

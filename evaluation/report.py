@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from hyperstate.evaluation import grid
 from hyperstate.evaluation.stats import bootstrap_ci, iqm, mean_ci_curve
 
 REFERENCE_AGENT = "task_aware"
@@ -107,13 +108,13 @@ def write_summary(out: Path, records: list[dict]) -> list[dict]:
     rows = summary_rows(records)
     extra = sorted({k for row in rows for k in row} - set(SUMMARY_FIELDS))
     fields = SUMMARY_FIELDS + extra  # task-specific metrics go last
-    tmp = out / "summary.csv.tmp"
+    tmp = out / f"{grid.SUMMARY}.tmp"
     with tmp.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=fields)
         writer.writeheader()
         for row in rows:
             writer.writerow({k: "" if row.get(k) is None else row[k] for k in fields})
-    tmp.replace(out / "summary.csv")
+    tmp.replace(out / grid.SUMMARY)
     return rows
 
 
@@ -167,7 +168,7 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    figures = out / "figures"
+    figures = out / grid.FIGURES
     figures.mkdir(parents=True, exist_ok=True)
     written = []
     tasks = sorted({r["task"] for r in records})
@@ -250,8 +251,8 @@ def _behaviour_plot(out: Path, record: dict, figures: Path, plt) -> Path | None:
     """x-position vs step of the final deployment, one line per distinct task, zone borders dashed."""
     from hyperstate import suite
 
-    cell = f"{record['agent']}__{record['task']}__s{record['seed']}"
-    npz = out / "cells" / cell / "deployment.npz"
+    cell = grid.record_cell_id(record)
+    npz = grid.cell_dir(out, cell) / grid.DEPLOYMENT
     if not npz.exists():
         return None
     data = np.load(npz)

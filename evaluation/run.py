@@ -25,6 +25,7 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "disable")
 
 from hyperstate import agents, suite
+from hyperstate.evaluation import grid as grid_layout
 from hyperstate.evaluation import protocol
 from hyperstate.evaluation.cell import (
     CellSpec,
@@ -213,10 +214,10 @@ def incompatible_cells(args: argparse.Namespace, names: list[str], overrides: di
 def prepare_out(args: argparse.Namespace, grid: dict) -> None:
     """Refuses to mix grids or overwrite results unless asked (--resume / --force)."""
     out: Path = args.out
-    grid_file = out / "grid.json"
+    grid_file = out / grid_layout.GRID
     if args.force and out.exists():
         shutil.rmtree(out)
-    has_results = grid_file.exists() or (out / "results.json").exists() or (out / "cells").exists()
+    has_results = grid_file.exists() or (out / grid_layout.RESULTS).exists() or (out / grid_layout.CELLS).exists()
     if has_results:
         previous = json.loads(grid_file.read_text()) if grid_file.exists() else None
         if not args.resume:
@@ -312,7 +313,7 @@ def write_diagnostics(out: Path, records: list[dict]) -> None:
     for record in records:
         if not record.get("complete"):
             continue
-        cell = f"{record['agent']}__{record['task']}__s{record['seed']}"
+        cell = grid_layout.record_cell_id(record)
         try:
             cell_diagnostics(out, cell)
         except Exception as e:  # noqa: BLE001  (a figure must not cost the results)

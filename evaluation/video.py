@@ -26,6 +26,7 @@ import numpy as np
 from PIL import Image, ImageDraw
 
 from hyperstate import suite
+from hyperstate.evaluation import grid as grid_layout
 from hyperstate.evaluation import protocol
 from hyperstate.evaluation.cell import import_modules
 from hyperstate.evaluation.deploy import EVAL_SEED, evaluation_tasks
@@ -163,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--width", type=int, default=320)
     parser.add_argument("--height", type=int, default=240)
     args = parser.parse_args(argv)
-    grid_file = args.out / "grid.json"
+    grid_file = args.out / grid_layout.GRID
     if not grid_file.exists():
         print(
             f"evaluation/video.py: error: {args.out} holds no evaluation/run.py results (no grid.json)", file=sys.stderr
@@ -174,14 +175,14 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     grid = json.loads(grid_file.read_text())
     import_modules(args.imports)
-    cells = args.cells or [f"{a}__{t}__s{grid['seeds'][0]}" for t in grid["tasks"] for a in grid["agents"]]
+    cells = args.cells or [grid_layout.cell_id(a, t, grid["seeds"][0]) for t in grid["tasks"] for a in grid["agents"]]
     for cell in cells:
-        saved = args.out / "cells" / cell / "agent.pt"
+        saved = grid_layout.cell_dir(args.out, cell) / grid_layout.AGENT
         if not saved.exists():
             print(f"evaluation/video.py: no trained agent for {cell} (skipped)", file=sys.stderr)
             continue
-        agent = protocol.load_agent(cell.split("__")[0], saved)
-        task = cell.split("__")[1]
+        name, task, _ = grid_layout.parse_cell_id(cell)
+        agent = protocol.load_agent(name, saved)
         path = args.out / "videos" / f"{cell}.mp4"
         info = render_deployment(
             agent,

@@ -402,3 +402,22 @@ def test_figure_2_config_is_valid():
     assert overrides["oracle_rh_prior10"]["bonuses.0.updates_per_iteration"] == 4
     assert all(o["ppo.entropy_coef"] == 0.01 for o in overrides.values())
     assert all(o["physics_threads"] == 1 for o in overrides.values())
+
+
+def test_grid_layout_owns_cell_names_and_paths(tmp_path):
+    from hyperstate.evaluation import grid
+
+    cell = grid.cell_id("oracle_rh", "cheetah_dir_sparse", 12)
+    assert cell == "oracle_rh__cheetah_dir_sparse__s12"
+    assert grid.parse_cell_id(cell) == ("oracle_rh", "cheetah_dir_sparse", 12)
+    assert grid.record_cell_id({"agent": "a", "task": "t", "seed": 0}) == "a__t__s0"
+    for bad in ("oracle__cheetah", "a__b__seed1", "a__b__c__s1"):
+        with pytest.raises(ValueError, match="not a cell id"):
+            grid.parse_cell_id(bad)
+    assert grid.cell_ids(tmp_path) == []
+    for frames in (2000, 1000):
+        path = grid.snapshot_path(tmp_path, cell, frames)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text("x")
+    assert grid.cell_ids(tmp_path) == [cell]
+    assert [f for f, _ in grid.snapshots(tmp_path, cell)] == [1000, 2000]
