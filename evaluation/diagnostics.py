@@ -12,8 +12,9 @@ deployments, where the belief changes step by step:
 writes `OUT/figures/bonus_<cell>.png` and the numbers behind it, `OUT/cells/<cell>/bonus_landscape.npz`.
 The top row shows, per belief value, the bonus over x (columns) at each checkpoint (rows); the bottom
 row the bonus over (step, x) under the belief the agent had at that step of a deployment, with the
-deployment's x(t) drawn on top. Each checkpoint's values are divided by that checkpoint's largest value
-(the agent sees the bonus divided by a running std anyway), so colours compare places, not checkpoints.
+deployment's x(t) drawn on top. Colours are log10 of each checkpoint's values divided by that checkpoint's
+largest value (the agent sees the bonus divided by a running std anyway), over 4 decades: they compare
+places, not checkpoints, and show gradients of orders of magnitude.
 """
 
 from __future__ import annotations
@@ -70,10 +71,18 @@ def along_deployment(agent: Any, deployment: Deployment, key: str, xs: np.ndarra
     return {name: np.stack(v) for name, v in out.items()}
 
 
+# Colours span this many decades below each checkpoint's largest bonus: the bonus varies over orders of
+# magnitude (near zero where the agent has been, large far out), and a linear scale hides the gradient
+# along the way from one to the other.
+DECADES = 4
+
+
 def _normalised(values: np.ndarray) -> np.ndarray:
-    """Divides by the largest value over every axis but the first (one checkpoint's values)."""
+    """log10 of the values divided by the largest over every axis but the first (one checkpoint's values),
+    floored at -DECADES."""
     top = values.reshape(len(values), -1).max(axis=1)
-    return values / np.where(top > 0, top, 1.0).reshape(-1, *([1] * (values.ndim - 1)))
+    ratio = values / np.where(top > 0, top, 1.0).reshape(-1, *([1] * (values.ndim - 1)))
+    return np.log10(np.maximum(ratio, 10.0**-DECADES))
 
 
 def cell_diagnostics(out: Path, cell: str, tasks_per_value: int = 1) -> Path | None:
@@ -154,8 +163,8 @@ def _draw(out, cell, task, names, xs, frames, labels, through_training, along, r
                 aspect="auto",
                 origin="lower",
                 cmap="viridis",
-                vmin=0,
-                vmax=1,
+                vmin=-DECADES,
+                vmax=0,
                 extent=(xs[0], xs[-1], frames[0] / 1e6, frames[-1] / 1e6),
             )
             ax.set_title(f"{name}\nbelief: {labels[v]}", fontsize=8)
@@ -163,7 +172,7 @@ def _draw(out, cell, task, names, xs, frames, labels, through_training, along, r
             ax.set_ylabel("training frames (M)")
             for border in (-zone, zone) if zone else ():
                 ax.axvline(border, color="w", linestyle="--", linewidth=0.8)
-        fig.colorbar(image, ax=axes[2 * b, n_values - 1], label="bonus / checkpoint max")
+        fig.colorbar(image, ax=axes[2 * b, n_values - 1], label="log10(bonus / checkpoint max)")
         deployment = _normalised(along[name][None])[0]  # the final agent: one scale for all its runs
         steps = np.arange(1, deployment.shape[1] + 1)
         for i in range(columns):
@@ -176,8 +185,8 @@ def _draw(out, cell, task, names, xs, frames, labels, through_training, along, r
                 aspect="auto",
                 origin="lower",
                 cmap="viridis",
-                vmin=0,
-                vmax=1,
+                vmin=-DECADES,
+                vmax=0,
                 extent=(steps[0], steps[-1], xs[0], xs[-1]),
             )
             ax.plot(steps, run.observations[key][:, i, 0], color="r", linewidth=1.2)
