@@ -49,7 +49,7 @@ class CellSpec:
     overrides: dict
     out: str
     resume: bool
-    progress: bool = True
+    progress: bool = False  # the agent's own progress bar (evaluation/run.py draws one view of all cells instead)
     position: int = 0
     imports: tuple[str, ...] = ()  # user modules that register tasks and agents, imported in the worker first
     physics_threads: int = 0  # the cores this cell may use for physics (0: all); parallel cells share them
@@ -209,8 +209,31 @@ def run_cell(spec: CellSpec) -> dict:
         final_done = bool(record["curve"]) and record["curve"][-1]["frames"] == frames
         return (bucket >= 1 and not done) or (frames >= spec.frames and not final_done)
 
+    last_progress = [0.0]
+
+    def report_progress(frames: int, fps: float, complete: bool = False) -> None:
+        """The cell's state for the driver's view (evaluation/progress.py); at most every 2 s."""
+        now = time.perf_counter()
+        if not complete and now - last_progress[0] < 2.0:
+            return
+        last_progress[0] = now
+        wall = now - started
+        point = record["curve"][-1] if record["curve"] else None
+        state = {
+            "frames": frames,
+            "total_frames": spec.frames,
+            "fps": fps,
+            "wall_seconds": wall,
+            "online_return": None if point is None else point["online_return"],
+            "return_frames": None if point is None else point["frames"],
+            "eta_seconds": None if frames <= 0 else max(0.0, (spec.frames - frames) * wall / frames),
+            "complete": complete,
+        }
+        write_json_atomic(directory / grid.PROGRESS, state)
+
     def on_iteration(log: dict) -> bool:
         frames = int(log["frames"])
+        report_progress(frames, float(log.get("fps", 0.0)), complete=False)
         for key, value in log.items():
             if key.startswith("reward_share/"):
                 shares.setdefault(key, []).append(value)
@@ -262,6 +285,7 @@ def run_cell(spec: CellSpec) -> dict:
     agent.save(directory / grid.AGENT)
     record["complete"] = True
     write_json_atomic(record_path, record)
+    report_progress(record["frames"], 0.0, complete=True)
     writer.close()
     return record
 

@@ -4,8 +4,9 @@
     OUT/results.json              one record per cell                                   driver
     OUT/summary.csv, OUT/figures/ the report                                            driver
     OUT/tb/<cell>/                tensorboard scalars                                   the cell
-    OUT/cells/<cell>/             record.json, checkpoint.pt, snapshots/agent_<frames>.pt,
-                                  agent.pt, deployment.npz, coverage.npy                the cell
+    OUT/cells/<cell>/             record.json, progress.json, checkpoint.pt,
+                                  snapshots/agent_<frames>.pt, agent.pt,
+                                  deployment.npz, coverage.npy, bonus_landscape.npz     the cell
 
 A cell is `<agent>__<task>__s<seed>`. Cells write only their own folders; the driver (evaluation/run.py)
 alone writes the grid-level files.
@@ -27,6 +28,7 @@ RECORD = "record.json"
 AGENT = "agent.pt"
 DEPLOYMENT = "deployment.npz"
 COVERAGE = "coverage.npy"
+PROGRESS = "progress.json"
 SNAPSHOTS = "snapshots"
 
 

@@ -35,6 +35,7 @@ from hyperstate.evaluation.cell import (
     write_json_atomic,
     write_results,
 )
+from hyperstate.evaluation.progress import GridProgress
 from hyperstate.evaluation.report import REFERENCE_AGENT, text_table, write_figures, write_summary
 
 
@@ -81,10 +82,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--config",
         type=Path,
-        default=None,
+        nargs="+",
+        default=[],
         metavar="FILE",
-        help="TOML or YAML overrides: a table per preset name, and/or 'all' for every agent, "
-        'mapping dotted config fields to values (e.g. [all] "ppo.num_envs" = 32)',
+        help="TOML or YAML overrides: a table per agent name, and/or 'all' for every agent, "
+        'mapping dotted config fields to values (e.g. [all] "ppo.num_envs" = 32); with several files, '
+        "later ones override earlier ones key by key (a base file plus one change per experiment)",
     )
     p.add_argument(
         "--import",
@@ -134,7 +137,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="parallel cells (local executor; default: 1 per 2 cores, at least 1)",
     )
     p.add_argument("--ray-address", default=None, help="Ray cluster address (default: $RAY_ADDRESS, else local)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.add_argument(
+        "--no-progress",
+        action="store_true",
+        help="no progress view (on a terminal: a live bar per running cell; elsewhere: a line per running cell "
+        "every minute and one per finished cell)",
+    )
     return p.parse_args(argv)
 
 
@@ -181,7 +189,10 @@ def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
         raise UsageError(f"--video-tasks must be positive, got {args.video_tasks}")
     if args.episodes_per_task is not None and args.episodes_per_task < 1:
         raise UsageError(f"--episodes-per-task must be positive, got {args.episodes_per_task}")
-    config = load_config_file(args.config)
+    config: dict[str, dict] = {}
+    for path in args.config:
+        for table, values in load_config_file(path).items():
+            config[table] = {**config.get(table, {}), **values}
     names = list(dict.fromkeys(args.agents + ([] if args.no_reference else [REFERENCE_AGENT])))
     # Tables for presets outside this grid are fine (one file can serve several grids); other names are typos.
     unknown = set(config) - set(protocol.agent_names()) - {"all"}
@@ -234,8 +245,10 @@ def prepare_out(args: argparse.Namespace, grid: dict) -> None:
     write_json_atomic(grid_file, grid)
 
 
-# How often the driver folds the cells' records into OUT/results.json while a grid runs.
+# How often the driver folds the cells' records into OUT/results.json while a grid runs, and how often it
+# looks at the cells (progress view, finished cells).
 RESULTS_EVERY_SECONDS = 30.0
+POLL_SECONDS = 2.0
 
 
 def _cell_failed(spec: CellSpec, error: BaseException) -> str:
@@ -245,38 +258,37 @@ def _cell_failed(spec: CellSpec, error: BaseException) -> str:
 
 
 def run_local(specs: list[CellSpec], workers: int, progress: bool, out: Path) -> list[str]:
-    """Runs the cells; returns one line per failed cell (a failure never stops the other cells)."""
-    from tqdm.auto import tqdm
+    """Runs the cells (in a thread for one worker, else in spawned processes) while the driver keeps the
+    grid-level files and the progress view; returns one line per failed cell (a failure stops no other)."""
+    import concurrent.futures
+    import multiprocessing
 
     failures = []
-    overall = tqdm(total=len(specs), desc="grid", unit="cell", disable=not progress, position=0)
+    view = GridProgress(out, [s.cell_id for s in specs], enabled=progress)
     if workers == 1:
-        for spec in specs:
-            try:
-                run_cell(spec)
-            except Exception as e:  # noqa: BLE001  (reported, and the grid goes on)
-                failures.append(_cell_failed(spec, e))
-            write_results(out)
-            overall.update(1)
+        executor = concurrent.futures.ThreadPoolExecutor(1)
     else:
-        import concurrent.futures
-        import multiprocessing
-
-        with concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn")) as pool:
-            pending = {pool.submit(run_cell, s): s for s in specs}
-            while pending:
-                done, _ = concurrent.futures.wait(
-                    pending, timeout=RESULTS_EVERY_SECONDS, return_when=concurrent.futures.FIRST_COMPLETED
-                )
+        executor = concurrent.futures.ProcessPoolExecutor(workers, mp_context=multiprocessing.get_context("spawn"))
+    with executor as pool:
+        pending = {pool.submit(run_cell, s): s for s in specs}
+        last_results = time.monotonic()
+        while pending:
+            done, _ = concurrent.futures.wait(
+                pending, timeout=POLL_SECONDS, return_when=concurrent.futures.FIRST_COMPLETED
+            )
+            view.poll()
+            if done or time.monotonic() - last_results >= RESULTS_EVERY_SECONDS:
                 write_results(out)  # the driver is the only writer of the grid-level files
-                for future in done:
-                    spec = pending.pop(future)
-                    try:
-                        future.result()
-                    except Exception as e:  # noqa: BLE001
-                        failures.append(_cell_failed(spec, e))
-                    overall.update(1)
-    overall.close()
+                last_results = time.monotonic()
+            for future in done:
+                spec = pending.pop(future)
+                try:
+                    future.result()
+                    view.cell_done(spec.cell_id)
+                except Exception as e:  # noqa: BLE001  (reported, and the grid goes on)
+                    failures.append(_cell_failed(spec, e))
+                    view.cell_done(spec.cell_id, failed=True)
+    view.close()
     return failures
 
 
@@ -285,24 +297,28 @@ def run_ray(specs: list[CellSpec], address: str | None, progress: bool, out: Pat
         import ray
     except ImportError:
         raise UsageError("--executor ray needs Ray: pip install '.[ray]'") from None
-    from tqdm.auto import tqdm
 
     ray.init(address=address or os.environ.get("RAY_ADDRESS"), ignore_reinit_error=True, log_to_driver=False)
     remote = ray.remote(num_cpus=1)(run_cell)
     spec_of = {remote.remote(s): s for s in specs}
     pending = list(spec_of)
     failures = []
-    overall = tqdm(total=len(specs), desc="grid (ray)", unit="cell", disable=not progress)
+    view = GridProgress(out, [s.cell_id for s in specs], enabled=progress)
+    last_results = time.monotonic()
     while pending:
-        done, pending = ray.wait(pending, num_returns=1, timeout=RESULTS_EVERY_SECONDS)
-        write_results(out)
+        done, pending = ray.wait(pending, num_returns=1, timeout=POLL_SECONDS)
+        view.poll()
+        if done or time.monotonic() - last_results >= RESULTS_EVERY_SECONDS:
+            write_results(out)
+            last_results = time.monotonic()
         for ref in done:
             try:
                 ray.get(ref)
+                view.cell_done(spec_of[ref].cell_id)
             except Exception as e:  # noqa: BLE001
                 failures.append(_cell_failed(spec_of[ref], e))
-        overall.update(len(done))
-    overall.close()
+                view.cell_done(spec_of[ref].cell_id, failed=True)
+    view.close()
     return failures
 
 
@@ -378,7 +394,7 @@ def main(argv: list[str] | None = None) -> int:
                 dict(overrides[name]),
                 str(args.out),
                 args.resume,
-                not args.no_progress,
+                False,  # cells draw nothing: the driver's GridProgress shows them all
                 i + 1,
                 tuple(args.imports),
                 # Parallel cells share the cores: each cell's physics gets its share.

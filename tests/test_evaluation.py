@@ -421,3 +421,78 @@ def test_grid_layout_owns_cell_names_and_paths(tmp_path):
         path.write_text("x")
     assert grid.cell_ids(tmp_path) == [cell]
     assert [f for f, _ in grid.snapshots(tmp_path, cell)] == [1000, 2000]
+
+
+def test_grid_progress_view_plain_and_live(tmp_path, monkeypatch):
+    import io
+
+    from hyperstate.evaluation import grid, progress
+    from hyperstate.evaluation.cell import write_json_atomic
+
+    cells = [grid.cell_id("oracle", "cheetah_dir_sparse", s) for s in (0, 1)]
+    state = {"frames": 400_000, "total_frames": 2_000_000, "fps": 6123.0, "wall_seconds": 65.0,
+             "online_return": 12.5, "return_frames": 200_000, "eta_seconds": 260.0, "complete": False}  # fmt: skip
+    grid.cell_dir(tmp_path, cells[0]).mkdir(parents=True)
+    write_json_atomic(grid.cell_dir(tmp_path, cells[0]) / grid.PROGRESS, state)
+    monkeypatch.setattr(progress, "PLAIN_EVERY_SECONDS", 0.0)
+    plain = io.StringIO()
+    view = progress.GridProgress(tmp_path, cells, stream=plain)
+    view.poll()
+    view.cell_done(cells[0])
+    lines = plain.getvalue().splitlines()
+    assert lines[0] == (
+        f"[grid 0/2 done] {cells[0]}  0.40M/2.00M frames  6,123 frames/s  online return 12.5 (at 0.20M)  ETA 4 min"
+    )
+    assert lines[1] == f"[grid 1/2 done] {cells[0]} done: online return 12.5 after 1.1 min" and len(lines) == 2
+    assert "\r" not in plain.getvalue()  # no carriage-return bars in logs
+
+    class Terminal(io.StringIO):
+        def isatty(self):
+            return True
+
+    live = Terminal()
+    view = progress.GridProgress(tmp_path, cells, stream=live)
+    view.poll()
+    assert cells[0] in live.getvalue() and "6,123" in live.getvalue()
+    view.cell_done(cells[0])
+    view.close()
+    quiet = io.StringIO()
+    progress.GridProgress(tmp_path, cells, enabled=False, stream=quiet).poll()
+    assert quiet.getvalue() == ""
+
+
+def test_cells_report_progress_and_draw_nothing(tmp_path, tiny_config):
+    out = tmp_path / "grid"
+    proc = run(
+        f"--agents oracle --tasks cheetah_dir_sparse --seeds 0 1 --frames 400 --eval-tasks 2 --no-reference "
+        f"--config {tiny_config} --workers 2 --out {out}".split()
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    done = [line for line in proc.stderr.splitlines() if line.startswith("[grid ")]
+    assert sorted(line.split()[3] for line in done) == [
+        "oracle__cheetah_dir_sparse__s0",
+        "oracle__cheetah_dir_sparse__s1",
+    ]
+    assert "\r" not in proc.stderr  # not a terminal: no bars, from the cells or the driver
+    for seed in (0, 1):
+        state = json.loads((out / "cells" / f"oracle__cheetah_dir_sparse__s{seed}" / "progress.json").read_text())
+        assert state["complete"] and state["frames"] == 400 and state["total_frames"] == 400
+
+
+def test_several_config_files_merge_in_order(tmp_path):
+    from hyperstate.evaluation.run import build_grid, parse_args
+
+    base, change = tmp_path / "base.toml", tmp_path / "change.yaml"
+    base.write_text('[all]\n"ppo.num_envs" = 8\n"ppo.entropy_coef" = 0.01\n[oracle_rh]\n"bonuses.0.buffer_size" = 5\n')
+    change.write_text("all:\n  ppo.entropy_coef: 0.001\noracle_rh:\n  bonuses.0.weight: 3.0\n")
+    args = parse_args(
+        ["--agents", "oracle_rh", "--tasks", "cheetah_dir_sparse", "--frames", "100", "--out", str(tmp_path / "o"),
+         "--config", str(base), str(change), "--no-reference"]
+    )  # fmt: skip
+    _, overrides = build_grid(args)
+    assert overrides["oracle_rh"] == {
+        "ppo.num_envs": 8,
+        "ppo.entropy_coef": 0.001,
+        "bonuses.0.buffer_size": 5,
+        "bonuses.0.weight": 3.0,
+    }
