@@ -5,8 +5,8 @@ Everything a cell writes lives in `OUT/cells/<agent>__<task>__s<seed>/` (and its
 training checkpoint, the agent at every evaluation point (`snapshots/`), the final agent, and the final
 deployment's trajectories (`deployment.npz`). A cell never writes the grid-level files: the driver
 (evaluation/run.py) alone writes `results.json`, `summary.csv` and the figures, so parallel cells never
-touch a shared file. A cell whose record says `complete` is never re-run; an incomplete one resumes from
-its checkpoint.
+touch a shared file. A cell whose record says `complete` is never re-run (on --resume it is only brought up
+to the current metrics, evaluation/upgrade.py); an incomplete one resumes from its checkpoint.
 """
 
 from __future__ import annotations
@@ -33,6 +33,7 @@ from hyperstate.evaluation.deploy import (
     evaluation_tasks,
     reads_true_task,
 )
+from hyperstate.evaluation.upgrade import upgrade_record
 
 
 @dataclasses.dataclass(frozen=True)
@@ -154,6 +155,9 @@ def run_cell(spec: CellSpec) -> dict:
     if spec.resume and record_path.exists():
         record = json.loads(record_path.read_text())
         if record.get("complete"):
+            # Written by older code? Brought up to the current metrics from what the cell saved.
+            if upgrade_record(record, directory, spec.episodes_per_task):
+                write_json_atomic(record_path, record)
             return record
     agent = protocol.make_agent(spec.agent, **spec.overrides)
     record = {

@@ -150,30 +150,30 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
     assert any((out / "tb").rglob("events.out.tfevents.*"))
     assert "oracle" in proc.stdout and "IQM" in proc.stdout  # the closing text table
 
-    # Grids from before `certainty_equivalent` and the per-step probe existed get them from what the
-    # cells saved (the reference agent; the deployment's features and beliefs), equal to a fresh run's.
+    # Grids written by older code, without `certainty_equivalent`, the per-step probe, a task metric or the
+    # stochastic deployment, get them on --resume from what the cells saved, equal to a fresh run's.
     path = out / "cells" / "task_aware__cheetah_dir_sparse__s0" / "record.json"
     varibad_path = out / "cells" / "varibad__cheetah_dir_sparse__s1" / "record.json"
     record, varibad = json.loads(path.read_text()), json.loads(varibad_path.read_text())
     expected = record["final"].pop("certainty_equivalent")
     expected_kl = varibad["final"].pop("probe_kl_per_step")
     del varibad["final"]["probe_accuracy_per_step"]
+    expected_turned = varibad["final"].pop("turned_around")
+    expected_stochastic = varibad["final"].pop("stochastic")
     path.write_text(json.dumps(record))
     varibad_path.write_text(json.dumps(varibad))
-    proc = subprocess.run(
-        [sys.executable, "-m", "hyperstate.evaluation.backfill", str(out)],
-        capture_output=True,
-        text=True,
-        cwd=ROOT,
-        timeout=300,
+    proc = run(
+        "--agents oracle varibad --tasks cheetah_dir_sparse --seeds 0 1 --frames 400 --eval-every 200 "
+        f"--eval-tasks 4 --workers 2 --config {tiny_config} --out {out} --no-progress --resume".split()
     )
     assert proc.returncode == 0, proc.stderr
-    assert "2 cells updated" in proc.stdout
     again = json.loads(path.read_text())["final"]["certainty_equivalent"]
     assert again["online_return_per_task"] == pytest.approx(expected["online_return_per_task"])
     refit = json.loads(varibad_path.read_text())["final"]
     assert refit["probe_kl_per_step"] == pytest.approx(expected_kl, rel=1e-5, abs=1e-7)
     assert refit["probe_kl"] == pytest.approx(varibad["final"]["probe_kl"], rel=1e-5, abs=1e-7)
+    assert refit["turned_around"] == expected_turned  # None where no deployment was wrong first
+    assert refit["stochastic"]["online_return_per_task"] == pytest.approx(expected_stochastic["online_return_per_task"])
     results = {(r["agent"], r["seed"]): r for r in json.loads((out / "results.json").read_text())}
     assert results[("task_aware", 0)]["final"]["certainty_equivalent"]["online_return"] == again["online_return"]
 
