@@ -16,7 +16,9 @@ import json
 import os
 import platform
 import subprocess
+import sys
 import time
+from collections.abc import Callable
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -54,6 +56,7 @@ class CellSpec:
     position: int = 0
     imports: tuple[str, ...] = ()  # user modules that register tasks and agents, imported in the worker first
     physics_threads: int = 0  # the cores this cell may use for physics (0: all); parallel cells share them
+    storage: str | None = None  # where a Ray cell keeps its files between attempts (evaluation/storage.py)
 
     @property
     def cell_id(self) -> str:
@@ -77,6 +80,28 @@ def write_json_atomic(path: Path, data: Any) -> None:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def write_bytes_atomic(path: Path, data: bytes) -> None:
+    """Writes bytes through a temporary file of a unique name (see `write_json_atomic`)."""
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        os.fchmod(fd, 0o644)
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def report_failure(spec: CellSpec, error: BaseException) -> str:
+    """Prints one line about a failed cell to stderr and returns it."""
+    line = f"{spec.cell_id}: {type(error).__name__}: {error}".splitlines()[0]
+    print(f"evaluation/run.py: cell failed (the others go on; --resume retries it): {line}", file=sys.stderr)
+    return line
 
 
 def _json_default(value: Any) -> Any:
@@ -139,9 +164,11 @@ def training_task(spec: CellSpec, agent) -> str:
     return dense if dense is not None and reads_true_task(agent) else spec.task
 
 
-def run_cell(spec: CellSpec) -> dict:
+def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
     """Trains and evaluates one cell; returns its record (also on disk). The agent is used only through
-    the benchmarkable-agent protocol (evaluation/protocol.py)."""
+    the benchmarkable-agent protocol (evaluation/protocol.py). `sync()`, if given, is called before every
+    training iteration's bookkeeping, when the files of the previous one (checkpoint included) are
+    written: a Ray cell copies them to its storage there (evaluation/remote.py)."""
     import torch  # noqa: F401  (imported here so that worker processes set their own threads)
     from torch.utils.tensorboard import SummaryWriter
 
@@ -175,9 +202,9 @@ def run_cell(spec: CellSpec) -> dict:
     if spec.resume and record_path.exists():
         record["curve"] = json.loads(record_path.read_text())["curve"]
     tasks = evaluation_tasks(spec.task, spec.eval_tasks)
-    coverage = HyperStateCoverage()
+    coverage = HyperStateCoverage.for_task(spec.task)  # None where the task declares no coverage grid
     coverage_path = directory / grid.COVERAGE
-    if spec.resume and coverage_path.exists():
+    if coverage is not None and spec.resume and coverage_path.exists():
         # Cells are a set: replaying iterations after the checkpoint marks the same cells again.
         coverage.visited = np.load(coverage_path)
     writer = SummaryWriter(log_dir=str(Path(spec.out) / grid.TENSORBOARD / spec.cell_id))
@@ -198,7 +225,7 @@ def run_cell(spec: CellSpec) -> dict:
         if shares:
             point["reward_share"] = {k.removeprefix("reward_share/"): float(np.mean(v)) for k, v in shares.items()}
             shares.clear()
-        if coverage.visited.any():
+        if coverage is not None and coverage.visited.any():
             point["coverage"] = coverage.fraction()
             writer.add_scalar("eval/hyperstate_coverage", point["coverage"], frames)
         # A point re-run after a crash (its checkpoint was not yet written) replaces the old one.
@@ -236,6 +263,8 @@ def run_cell(spec: CellSpec) -> dict:
         write_json_atomic(directory / grid.PROGRESS, state)
 
     def on_iteration(log: dict) -> bool:
+        if sync is not None:
+            sync()
         frames = int(log["frames"])
         report_progress(frames, float(log.get("fps", 0.0)), complete=False)
         for key, value in log.items():
@@ -250,7 +279,8 @@ def run_cell(spec: CellSpec) -> dict:
         snapshot = grid.snapshot_path(Path(spec.out), spec.cell_id, frames)
         snapshot.parent.mkdir(exist_ok=True)
         agent.save(snapshot)
-        np.save(coverage_path, coverage.visited)
+        if coverage is not None:
+            np.save(coverage_path, coverage.visited)
         write_json_atomic(record_path, record)
         return True  # checkpoint now: a resumed run rejoins the curve here
 
@@ -265,7 +295,7 @@ def run_cell(spec: CellSpec) -> dict:
         resume=spec.resume,
         progress=spec.progress,
         on_iteration=on_iteration,
-        on_rollout=lambda obs: coverage.update(obs) if coverage.applies_to(obs) else None,
+        on_rollout=None if coverage is None else coverage.update,
     )
     record["frames"] = int(getattr(agent, "total_frames", spec.frames))
     final = deploy(agent, spec.task, tasks, spec.episodes_per_task)

@@ -1,9 +1,10 @@
 """Why an agent explores the way it does: the hyper-state bonus landscape through training (Figure 1).
 
 For a finished cell with a hyper-state (or state) RND bonus, this evaluates the bonus r(x, b) along the
-task's position (its first declared position key, when that is one number such as cheetah's x) for each
-belief value the agent holds on held-out tasks: the prior (the first step of a deployment) and the
-belief at the end of a deployment on each task (e.g. "forward revealed", "backward revealed"). It does
+position axis the task declares (`suite.register(..., position_axis=suite.PositionAxis(...))`, a
+one-number position x) for each belief value the agent holds on held-out tasks: the prior (the first step
+of a deployment) and the belief at the end of a deployment on each task (e.g. "forward revealed",
+"backward revealed"). It does
 so for the agent at every evaluation point (`snapshots/`), and for the final agent along its own
 deployments, where the belief changes step by step:
 
@@ -33,13 +34,13 @@ from hyperstate.evaluation.deploy import Deployment, deploy, evaluation_tasks
 GRID_POINTS = 121
 
 
-def position_key(task: str) -> str | None:
-    """The task's first declared position key, if it is one number (such as cheetah's x); else None."""
-    keys = suite.position_keys(task) or ()
-    if not keys:
+def position_axis(task: str) -> suite.PositionAxis | None:
+    """The position axis the task declares, if its observation is one number; else None."""
+    axis = suite.position_axis(task)
+    if axis is None:
         return None
     spec = suite.load(task, seed=0).observation_spec()
-    return keys[0] if keys[0] in spec and int(np.prod(spec[keys[0]].shape)) == 1 else None
+    return axis if axis.key in spec and int(np.prod(spec[axis.key].shape)) == 1 else None
 
 
 def belief_values(deployment: Deployment) -> tuple[list[str], np.ndarray]:
@@ -98,18 +99,19 @@ def cell_diagnostics(out: Path, cell: str, tasks_per_value: int = 1) -> Path | N
     final = protocol.load_agent(name, final_path)
     if not (hasattr(final, "bonus_values") and hasattr(final, "belief_features")):
         return None  # not an agent of bonus components: nothing to draw
-    key = position_key(task)
-    if key is None or not final.bonus_values(*_probe_input(final, task)):
+    axis = position_axis(task)
+    if axis is None or not final.bonus_values(*_probe_input(final, task)):
         return None
+    key = axis.key
     support = suite.task_prior(task).support()
     held_out = evaluation_tasks(task, max(2, 0 if support is None else len(support)) * tasks_per_value)
     final_run = deploy(final, task, held_out)
     checkpoints = [(frames, protocol.load_agent(name, path)) for frames, path in snapshots]
     runs = [deploy(agent, task, held_out) for _, agent in checkpoints]
-    # Wide enough for every position any checkpoint's deployments reached, and twice the zone.
+    # Wide enough for every position any checkpoint's deployments reached, and twice the declared region.
     reach = max(float(np.abs(run.observations[key]).max()) for run in [final_run, *runs])
-    zone = getattr(suite.load(task, seed=0).task, "zone_radius", 0.0) or 0.0
-    half_width = max(2.0 * zone, 1.1 * reach, 1.0)
+    region = max(np.abs(axis.region)) if axis.region else 0.0
+    half_width = max(2.0 * region, 1.1 * reach, 1.0)
     xs = np.linspace(-half_width, half_width, GRID_POINTS)
     frames, per_checkpoint, labels = [], [], None
     for (frame, agent), run in zip(checkpoints, runs, strict=True):
@@ -130,7 +132,7 @@ def cell_diagnostics(out: Path, cell: str, tasks_per_value: int = 1) -> Path | N
         **{f"training_{n}": v for n, v in through_training.items()},
         **{f"deployment_{n}": v for n, v in along.items()},
     )
-    return _draw(out, cell, task, names, xs, np.array(frames), labels, through_training, along, final_run, key, zone)
+    return _draw(out, cell, names, xs, np.array(frames), labels, through_training, along, final_run, axis)
 
 
 def _probe_input(agent: Any, task: str) -> tuple[dict, np.ndarray]:
@@ -140,7 +142,7 @@ def _probe_input(agent: Any, task: str) -> tuple[dict, np.ndarray]:
     return obs, agent.belief_features(state)
 
 
-def _draw(out, cell, task, names, xs, frames, labels, through_training, along, run, key, zone) -> Path:
+def _draw(out, cell, names, xs, frames, labels, through_training, along, run, axis) -> Path:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -168,9 +170,9 @@ def _draw(out, cell, task, names, xs, frames, labels, through_training, along, r
                 extent=(xs[0], xs[-1], frames[0] / 1e6, frames[-1] / 1e6),
             )
             ax.set_title(f"{name}\nbelief: {labels[v]}", fontsize=8)
-            ax.set_xlabel(key)
+            ax.set_xlabel(axis.label)
             ax.set_ylabel("training frames (M)")
-            for border in (-zone, zone) if zone else ():
+            for border in axis.region or ():
                 ax.axvline(border, color="w", linestyle="--", linewidth=0.8)
         fig.colorbar(image, ax=axes[2 * b, n_values - 1], label="log10(bonus / checkpoint max)")
         deployment = _normalised(along[name][None])[0]  # the final agent: one scale for all its runs
@@ -189,12 +191,12 @@ def _draw(out, cell, task, names, xs, frames, labels, through_training, along, r
                 vmax=0,
                 extent=(steps[0], steps[-1], xs[0], xs[-1]),
             )
-            ax.plot(steps, run.observations[key][:, i, 0], color="r", linewidth=1.2)
-            for border in (-zone, zone) if zone else ():
+            ax.plot(steps, run.observations[axis.key][:, i, 0], color="r", linewidth=1.2)
+            for border in axis.region or ():
                 ax.axhline(border, color="w", linestyle="--", linewidth=0.8)
             ax.set_title(f"{name}, final agent\ndeployed on task {np.round(run.tasks[i], 2).tolist()}", fontsize=8)
             ax.set_xlabel("step of the BAMDP episode")
-            ax.set_ylabel(f"{key} (red: deployed)")
+            ax.set_ylabel(f"{axis.label} (red: deployed)")
     fig.suptitle(f"bonus landscape of {cell}", fontsize=10)
     figures = out / grid.FIGURES
     figures.mkdir(parents=True, exist_ok=True)

@@ -9,7 +9,9 @@
                                   deployment.npz, coverage.npy, bonus_landscape.npz     the cell
 
 A cell is `<agent>__<task>__s<seed>`. Cells write only their own folders; the driver (evaluation/run.py)
-alone writes the grid-level files.
+alone writes the grid-level files. A Ray cell works in the same layout under a folder of its own node and
+keeps `cells/<cell>/` and `tb/<cell>/` in `--storage` under the same relative paths (evaluation/storage.py);
+the driver writes what it returns into OUT.
 """
 
 from __future__ import annotations

@@ -18,6 +18,10 @@ from typing import TextIO
 from hyperstate.evaluation import grid
 
 PLAIN_EVERY_SECONDS = 60.0
+# How often the driver folds the cells' records into OUT/results.json while a grid runs, and how often it
+# looks at the cells (progress view, finished cells).
+RESULTS_EVERY_SECONDS = 30.0
+POLL_SECONDS = 2.0
 
 
 def read_progress(out: Path, cell: str) -> dict | None:

@@ -3,13 +3,13 @@
 from __future__ import annotations
 
 import csv
-import functools
 import warnings
 from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
 
+from hyperstate import suite
 from hyperstate.evaluation import grid
 from hyperstate.evaluation.stats import bootstrap_ci, iqm, mean_ci_curve
 
@@ -27,24 +27,11 @@ SUMMARY_FIELDS = [
     "bayes_estimate",
     "gap_to_bayes",
     "adaptive_reference_return",
-    "left_zone",
-    "first_exit_step",
-    "correct_direction",
-    "stuck",
     "probe_kl_after",
     "probe_accuracy_after",
     "final_coverage",
 ]
-METRICS = ("left_zone", "first_exit_step", "correct_direction", "stuck", "probe_kl_after", "probe_accuracy_after")
-
-
-@functools.cache
-def _bayes_estimator(task: str):
-    """The task's Bayes-optimal return estimator (from task-aware reference returns), or None; one
-    environment per task name, however many summary rows ask."""
-    from hyperstate import suite
-
-    return getattr(suite.load(task, seed=0).task, "bayes_optimal_estimate", None)
+METRICS = ("probe_kl_after", "probe_accuracy_after")
 
 
 def _by_agent_task(records: list[dict]) -> dict[tuple[str, str], list[dict]]:
@@ -64,7 +51,7 @@ def summary_rows(records: list[dict]) -> list[dict]:
         low, high = bootstrap_ci(returns)
         reference = groups.get((REFERENCE_AGENT, task))
         ref = float(np.mean([r["final"]["online_return"] for r in reference])) if reference else None
-        estimator = _bayes_estimator(task)
+        estimator = suite.bayes_estimate(task)
         bayes = None
         if reference and estimator is not None:
             per_task = np.concatenate([r["final"]["online_return_per_task"] for r in reference])
@@ -99,7 +86,7 @@ def summary_rows(records: list[dict]) -> list[dict]:
 
 
 def _task_metric_names(cell: list[dict]) -> tuple[str, ...]:
-    """Exploration metrics a task declares beyond the cheetah-direction ones (e.g. `goal_reached`)."""
+    """The deployed-exploration metrics the cell's task declares (`suite.register(..., metrics=...)`)."""
     names = {n for r in cell for n in r["final"].get("exploration_metric_names", ())}
     return tuple(sorted(names - set(METRICS)))
 
@@ -107,7 +94,7 @@ def _task_metric_names(cell: list[dict]) -> tuple[str, ...]:
 def write_summary(out: Path, records: list[dict]) -> list[dict]:
     rows = summary_rows(records)
     extra = sorted({k for row in rows for k in row} - set(SUMMARY_FIELDS))
-    fields = SUMMARY_FIELDS + extra  # task-specific metrics go last
+    fields = SUMMARY_FIELDS + extra  # the tasks' declared metrics go last
     tmp = out / f"{grid.SUMMARY}.tmp"
     with tmp.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=fields)
@@ -127,14 +114,15 @@ def text_table(rows: list[dict]) -> str:
     wa = max([20, *(len(r["agent"]) for r in rows)])
     wt = max([20, *(len(r["task"]) for r in rows)])
     header = (
-        f"{'agent':<{wa}} {'task':<{wt}} {'seeds':>5} {'mean':>9} {'IQM':>9} {'95% CI':>19} {'regret':>9} {'left':>5}"
+        f"{'agent':<{wa}} {'task':<{wt}} {'seeds':>5} {'mean':>9} {'IQM':>9} {'95% CI':>19} {'regret':>9} "
+        f"{'to Bayes':>9}"
     )
     lines = [header, "-" * len(header)]
     for r in rows:
         ci = f"[{fmt(r['ci95_low'])}, {fmt(r['ci95_high'])}]"
         lines.append(
             f"{r['agent']:<{wa}} {r['task']:<{wt}} {r['seeds']:>5} {fmt(r['online_return_mean']):>9} "
-            f"{fmt(r['online_return_iqm']):>9} {ci:>19} {fmt(r['regret']):>9} {fmt(r['left_zone'], '.2f'):>5}"
+            f"{fmt(r['online_return_iqm']):>9} {ci:>19} {fmt(r['regret']):>9} {fmt(r['gap_to_bayes']):>9}"
         )
     return "\n".join(lines)
 
@@ -198,7 +186,7 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
         ax.set_title(task)
         ax.legend(fontsize=8)
         cov_ax.set_xlabel("frames")
-        cov_ax.set_ylabel("hyper-state coverage (x × belief cells visited)")
+        cov_ax.set_ylabel("hyper-state coverage (position × belief cells visited)")
         cov_ax.set_title("pseudo-exploration during meta-training")
         fig.tight_layout()
         path = figures / f"curves_{task}.png"
@@ -248,28 +236,26 @@ def _probe_plot(records: list[dict], task: str, figures: Path, plt) -> Path | No
 
 
 def _behaviour_plot(out: Path, record: dict, figures: Path, plt) -> Path | None:
-    """x-position vs step of the final deployment, one line per distinct task, zone borders dashed."""
-    from hyperstate import suite
-
+    """Position vs step of the final deployment, one line per distinct task, along the position axis the
+    task declares (`suite.PositionAxis`), its region's borders dashed; None for a task without one."""
+    axis = suite.position_axis(record["task"])
     cell = grid.record_cell_id(record)
     npz = grid.cell_dir(out, cell) / grid.DEPLOYMENT
-    if not npz.exists():
+    if axis is None or not npz.exists():
         return None
     data = np.load(npz)
-    if "obs_x_displacement" not in data:
+    if f"obs_{axis.key}" not in data:
         return None
     path = figures / f"behaviour_{cell}.png"
-    x, tasks = data["obs_x_displacement"][..., 0], data["tasks"]
-    zone = getattr(suite.load(record["task"], seed=0).task, "zone_radius", None)
+    x, tasks = data[f"obs_{axis.key}"][..., 0], data["tasks"]
     fig, ax = plt.subplots(figsize=(6, 3.5))
     for value in np.unique(tasks, axis=0):
         i = int(np.flatnonzero((tasks == value).all(axis=1))[0])
         ax.plot(np.arange(1, len(x) + 1), x[:, i], label=f"task {value.tolist()}")
-    if zone:
-        for border in (-zone, zone):
-            ax.axhline(border, color="k", linestyle="--", linewidth=1)
+    for border in axis.region or ():
+        ax.axhline(border, color="k", linestyle="--", linewidth=1)
     ax.set_xlabel("step of the BAMDP episode")
-    ax.set_ylabel("x-displacement from the start (m)")
+    ax.set_ylabel(axis.label)
     ax.set_title(f"{record['agent']} on {record['task']}, seed {record['seed']}")
     ax.legend(fontsize=8)
     fig.tight_layout()

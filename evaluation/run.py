@@ -31,11 +31,12 @@ from hyperstate.evaluation.cell import (
     CellSpec,
     import_modules,
     load_records,
+    report_failure,
     run_cell,
     write_json_atomic,
     write_results,
 )
-from hyperstate.evaluation.progress import GridProgress
+from hyperstate.evaluation.progress import POLL_SECONDS, RESULTS_EVERY_SECONDS, GridProgress
 from hyperstate.evaluation.report import REFERENCE_AGENT, text_table, write_figures, write_summary
 
 
@@ -136,7 +137,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="W",
         help="parallel cells (local executor; default: 1 per 2 cores, at least 1)",
     )
-    p.add_argument("--ray-address", default=None, help="Ray cluster address (default: $RAY_ADDRESS, else local)")
+    p.add_argument(
+        "--ray-address", default=None, help="Ray cluster address (default: $RAY_ADDRESS, else a local instance)"
+    )
+    p.add_argument(
+        "--storage",
+        default=None,
+        metavar="URI",
+        help="ray: where cells keep checkpoints, reachable from every node: a path or an fsspec URI such as "
+        "s3://bucket/prefix (default: OUT, for one machine or a shared filesystem)",
+    )
     p.add_argument(
         "--no-progress",
         action="store_true",
@@ -241,20 +251,29 @@ def prepare_out(args: argparse.Namespace, grid: dict) -> None:
                 f"--out {out} holds results of a different grid; --resume needs the same arguments "
                 "(or use --force or another --out)"
             )
+    if args.storage is not None:
+        _prepare_storage(args)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(grid_file, grid)
 
 
-# How often the driver folds the cells' records into OUT/results.json while a grid runs, and how often it
-# looks at the cells (progress view, finished cells).
-RESULTS_EVERY_SECONDS = 30.0
-POLL_SECONDS = 2.0
+def _prepare_storage(args: argparse.Namespace) -> None:
+    """A Ray grid's cells resume from whatever their storage holds: start only on an empty one unless
+    --resume (--force empties it)."""
+    from hyperstate.evaluation import storage
 
-
-def _cell_failed(spec: CellSpec, error: BaseException) -> str:
-    line = f"{spec.cell_id}: {type(error).__name__}: {error}".splitlines()[0]
-    print(f"evaluation/run.py: cell failed (the others go on; --resume retries it): {line}", file=sys.stderr)
-    return line
+    if args.executor != "ray":
+        raise UsageError("--storage is where Ray cells keep their files; the local executor works in --out")
+    try:
+        if args.force:
+            storage.clear(args.storage)
+        elif not args.resume and storage.holds_cells(args.storage):
+            raise UsageError(
+                f"--storage {args.storage} holds cells of an earlier run; pass --resume to continue them "
+                "or --force to delete them"
+            )
+    except (ImportError, OSError, ValueError) as e:
+        raise UsageError(f"--storage {args.storage}: {type(e).__name__}: {e}") from None
 
 
 def run_local(specs: list[CellSpec], workers: int, progress: bool, out: Path) -> list[str]:
@@ -286,38 +305,8 @@ def run_local(specs: list[CellSpec], workers: int, progress: bool, out: Path) ->
                     future.result()
                     view.cell_done(spec.cell_id)
                 except Exception as e:  # noqa: BLE001  (reported, and the grid goes on)
-                    failures.append(_cell_failed(spec, e))
+                    failures.append(report_failure(spec, e))
                     view.cell_done(spec.cell_id, failed=True)
-    view.close()
-    return failures
-
-
-def run_ray(specs: list[CellSpec], address: str | None, progress: bool, out: Path) -> list[str]:
-    try:
-        import ray
-    except ImportError:
-        raise UsageError("--executor ray needs Ray: pip install '.[ray]'") from None
-
-    ray.init(address=address or os.environ.get("RAY_ADDRESS"), ignore_reinit_error=True, log_to_driver=False)
-    remote = ray.remote(num_cpus=1)(run_cell)
-    spec_of = {remote.remote(s): s for s in specs}
-    pending = list(spec_of)
-    failures = []
-    view = GridProgress(out, [s.cell_id for s in specs], enabled=progress)
-    last_results = time.monotonic()
-    while pending:
-        done, pending = ray.wait(pending, num_returns=1, timeout=POLL_SECONDS)
-        view.poll()
-        if done or time.monotonic() - last_results >= RESULTS_EVERY_SECONDS:
-            write_results(out)
-            last_results = time.monotonic()
-        for ref in done:
-            try:
-                ray.get(ref)
-                view.cell_done(spec_of[ref].cell_id)
-            except Exception as e:  # noqa: BLE001
-                failures.append(_cell_failed(spec_of[ref], e))
-                view.cell_done(spec_of[ref].cell_id, failed=True)
     view.close()
     return failures
 
@@ -399,11 +388,14 @@ def main(argv: list[str] | None = None) -> int:
                 tuple(args.imports),
                 # Parallel cells share the cores: each cell's physics gets its share.
                 physics_threads=cells_per_worker_threads if args.executor == "local" and workers > 1 else 0,
+                storage=str(args.storage or args.out),
             )
         )
     started = time.perf_counter()
     try:
         if args.executor == "ray":
+            from hyperstate.evaluation.remote import run_ray
+
             failures = run_ray(specs, args.ray_address, not args.no_progress, args.out)
         else:
             failures = run_local(specs, workers, not args.no_progress, args.out)

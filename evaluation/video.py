@@ -112,6 +112,7 @@ def _render_one(agent, task: str, env, writer, width: int, height: int) -> tuple
     """One deployment from reset into `writer`; returns (return, frames written)."""
     step = env.reset()
     state, total, t, frames = None, 0.0, 0, 0
+    axis = suite.position_axis(task)  # where the task declares one, the caption says where the agent is
 
     def frame(reward_so_far: float) -> np.ndarray:
         pixels = env.physics.render(
@@ -121,10 +122,8 @@ def _render_one(agent, task: str, env, writer, width: int, height: int) -> tuple
         status = (
             f"episode {env.task.inner_episode + 1}/{env.task.episodes_per_task}  step {t}  return {reward_so_far:.1f}"
         )
-        if "x_displacement" in step.observation:
-            x = float(step.observation["x_displacement"][0])
-            zone = getattr(env.task, "zone_radius", 0.0)
-            status += f"  x {x:+.1f} m" + (f" ({'outside' if abs(x) >= zone else 'inside'} zone)" if zone else "")
+        if axis is not None and axis.key in step.observation:
+            status += "  " + axis.describe(float(np.asarray(step.observation[axis.key]).ravel()[0]))
         lines.append(status)
         if env.task.belief is not None:
             lines.append("exact belief " + " ".join(f"{p:.2f}" for p in env.task.belief))

@@ -19,6 +19,7 @@ from dm_control.rl import control
 from dm_control.suite import cheetah
 
 from hyperstate.suite._mujoco_batch import MujocoBatch
+from hyperstate.suite._registry import Coverage, PositionAxis
 from hyperstate.suite._seeding import SeedLike, spawn_seeds
 from hyperstate.suite.base import Marker, MetaTask, TaskPrior, check_action
 
@@ -33,6 +34,22 @@ EPISODE_LENGTH = 200  # control steps per MDP episode (10 s)
 ZONE_RADIUS = 5.0  # metres of zero velocity reward around the start
 CTRL_COST_WEIGHT = 0.05
 SETTLE_STEPS = 200  # physics steps that let a random initial pose settle (as dm_control's cheetah)
+# Hyper-state coverage: 1 m bins of the x-displacement over ±20 m (200 steps at a good gait reach ~15–25 m)
+# × 3 bins of the exact belief's last component.
+COVERAGE = Coverage("x_displacement", low=-20.0, high=20.0, bins=40, belief_bins=3)
+
+
+def position_axis(zone_radius: float) -> PositionAxis:
+    """What the harness plots the cheetah along: its x-displacement from the MDP episode's start, the
+    zone's borders dashed."""
+    return PositionAxis(
+        "x_displacement",
+        "x-displacement from the start (m)",
+        symbol="x",
+        unit="m",
+        region=(-zone_radius, zone_radius) if zone_radius > 0 else None,
+        region_name="zone",
+    )
 
 
 class Physics(cheetah.Physics):

@@ -3,6 +3,11 @@
 A task is a factory `factory(seed=None, **kwargs) -> control.Environment`. It may come with a batched
 simulator factory `batch_factory(num_envs, seed=None, **kwargs) -> BatchEnv` (same kwargs); tasks
 without one are batched by `LoopBatch`, which steps dm_control environments one by one.
+
+What the evaluation harness knows of a task it learns here, from what the task declares: its
+deployed-exploration metrics, its position (for state bonuses), its dense reference task, the position
+axis it is drawn along (`PositionAxis`), its hyper-state coverage grid (`Coverage`) and its Bayes-optimal
+return estimator. A task that declares none of these gets none of them; the harness names no task.
 """
 
 from __future__ import annotations
@@ -21,6 +26,57 @@ Factory = Callable[..., Any]
 
 
 @dataclasses.dataclass(frozen=True)
+class PositionAxis:
+    """A one-number position the harness draws the agent along: the behaviour plot (position against
+    step of the final deployment), the bonus landscape (evaluation/diagnostics.py) and the video caption.
+
+    `key` is the observation whose first component is the position; `label` the axis label; `symbol` and
+    `unit` how captions write it (`x +3.1 m`); `region`, if given, an interval of the axis drawn with
+    dashed borders and named in captions (`(inside zone)`), e.g. a sparse task's zone without reward.
+    """
+
+    key: str
+    label: str
+    symbol: str = "position"
+    unit: str = ""
+    region: tuple[float, float] | None = None
+    region_name: str = "region"
+
+    def __post_init__(self) -> None:
+        if self.region is not None:
+            low, high = self.region
+            if not low < high:
+                raise ValueError(f"PositionAxis region must be (low, high) with low < high, got {self.region}")
+            object.__setattr__(self, "region", (float(low), float(high)))
+
+    def describe(self, position: float) -> str:
+        """The position in words, for a caption: `x +3.1 m (outside zone)`."""
+        text = f"{self.symbol} {position:+.1f}" + (f" {self.unit}" if self.unit else "")
+        if self.region is not None:
+            inside = self.region[0] < position < self.region[1]
+            text += f" ({'inside' if inside else 'outside'} {self.region_name})"
+        return text
+
+
+@dataclasses.dataclass(frozen=True)
+class Coverage:
+    """The hyper-state coverage grid of a task (evaluation/coverage.py): `bins` equal bins of observation
+    `key`'s first component over [low, high] (positions beyond fall in the edge bins) × `belief_bins` equal
+    bins of the exact belief's last component (observation `belief_key`)."""
+
+    key: str
+    low: float
+    high: float
+    bins: int = 40
+    belief_bins: int = 3
+    belief_key: str = "belief"
+
+    def __post_init__(self) -> None:
+        if not self.low < self.high or self.bins < 1 or self.belief_bins < 1:
+            raise ValueError(f"Coverage needs low < high and positive bin counts, got {self}")
+
+
+@dataclasses.dataclass(frozen=True)
 class TaskEntry:
     """One registered meta-task."""
 
@@ -30,6 +86,9 @@ class TaskEntry:
     metrics: Callable[..., dict] | None = None
     position_keys: tuple[str, ...] | None = None
     reference_task: str | None = None
+    position_axis: PositionAxis | None = None
+    coverage: Coverage | None = None
+    bayes_estimate: Callable[[np.ndarray], float] | None = None
 
 
 _REGISTRY: dict[str, TaskEntry] = {}
@@ -45,6 +104,9 @@ def register(
     metrics: Callable[..., dict] | None = None,
     position_keys: tuple[str, ...] | None = None,
     reference_task: str | None = None,
+    position_axis: PositionAxis | None = None,
+    coverage: Coverage | None = None,
+    bayes_estimate: Callable[[np.ndarray], float] | None = None,
 ) -> Callable[[Factory], Factory]:
     """Decorator registering `factory(seed=None, **kwargs)` under `name`.
 
@@ -58,9 +120,18 @@ def register(
     `reference_task`, if given, names a registered task with the same observations, actions and task
     prior but a dense reward (e.g. `cheetah_dir` for `cheetah_dir_sparse`): the task-aware reference
     policy learns it there and is deployed on this task (evaluation/run.py).
+    `position_axis` (a `PositionAxis`), if given, is the one-number position the harness plots the agent
+    along; `coverage` (a `Coverage`), if given, the hyper-state grid whose visited fraction the grid logs;
+    `bayes_estimate`, if given, maps the task-aware reference's returns per deployment to an estimate of
+    the Bayes-optimal online return (`summary.csv`'s `bayes_estimate`).
     """
     if not isinstance(name, str) or not name:
         raise ValueError(f"task name must be a non-empty string, got {name!r}")
+    for value, kind, what in ((position_axis, PositionAxis, "position_axis"), (coverage, Coverage, "coverage")):
+        if value is not None and not isinstance(value, kind):
+            raise TypeError(f"{what} must be a suite.{kind.__name__}, got {type(value).__name__}")
+    if bayes_estimate is not None and not callable(bayes_estimate):
+        raise TypeError(f"bayes_estimate must be callable, got {type(bayes_estimate).__name__}")
     if reference_task is not None and (not isinstance(reference_task, str) or reference_task == name):
         raise ValueError(f"reference_task must be another task's name, got {reference_task!r}")
 
@@ -70,7 +141,15 @@ def register(
         if "seed" not in inspect.signature(factory).parameters:
             raise TypeError(f"factory for {name!r} must accept a `seed` keyword argument")
         _REGISTRY[name] = TaskEntry(
-            name, factory, batch, metrics, None if position_keys is None else tuple(position_keys), reference_task
+            name,
+            factory,
+            batch,
+            metrics,
+            None if position_keys is None else tuple(position_keys),
+            reference_task,
+            position_axis,
+            coverage,
+            bayes_estimate,
         )
         TASKS[:] = sorted(_REGISTRY)
         return factory
@@ -93,6 +172,21 @@ def exploration_metrics(name: str) -> Callable[..., dict] | None:
 def position_keys(name: str) -> tuple[str, ...] | None:
     """The observation keys task `name` declares as its position (for state bonuses), or None."""
     return _lookup(name).position_keys
+
+
+def position_axis(name: str) -> PositionAxis | None:
+    """The position axis task `name` declares for plots and captions, or None."""
+    return _lookup(name).position_axis
+
+
+def coverage(name: str) -> Coverage | None:
+    """The hyper-state coverage grid task `name` declares, or None."""
+    return _lookup(name).coverage
+
+
+def bayes_estimate(name: str) -> Callable[[np.ndarray], float] | None:
+    """Task `name`'s Bayes-optimal return estimator (from task-aware reference returns), or None."""
+    return _lookup(name).bayes_estimate
 
 
 def reference_task(name: str) -> str | None:

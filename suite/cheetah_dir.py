@@ -17,6 +17,7 @@ from dm_control.rl import control
 
 from hyperstate.suite._cheetah import (  # noqa: F401  (constants re-exported: the cheetah-direction task's numbers)
     CONTROL_TIMESTEP,
+    COVERAGE,
     CTRL_COST_WEIGHT,
     EPISODE_LENGTH,
     N_SUB_STEPS,
@@ -27,6 +28,7 @@ from hyperstate.suite._cheetah import (  # noqa: F401  (constants re-exported: t
     CheetahZoneTask,
     Physics,
     environment,
+    position_axis,
 )
 from hyperstate.suite._registry import register
 from hyperstate.suite._seeding import SeedLike
@@ -84,10 +86,6 @@ class CheetahDirection(CheetahZoneTask):
         if outside:
             self._belief = one_hot_direction(self._task)
         return self.direction * vx if outside else 0.0
-
-    def bayes_optimal_estimate(self, reference_returns: np.ndarray) -> float:
-        """See `bayes_optimal_estimate` (module level) with this task's zone."""
-        return bayes_optimal_estimate(reference_returns, self.zone_radius)
 
 
 def bayes_optimal_estimate(reference_returns: np.ndarray, zone_radius: float = ZONE_RADIUS) -> float:
@@ -192,9 +190,16 @@ def _register(name: str, zone_radius: float) -> None:
     metrics = functools.partial(zone_exploration_metrics, zone_radius=zone_radius)
     # The sparse task's task-aware reference learns on the dense task (same observations and prior).
     reference = "cheetah_dir" if zone_radius > 0 else None
-    register(name, batch=batch_factory, metrics=metrics, position_keys=("x_displacement",), reference_task=reference)(
-        factory
-    )
+    register(
+        name,
+        batch=batch_factory,
+        metrics=metrics,
+        position_keys=("x_displacement",),
+        reference_task=reference,
+        position_axis=position_axis(zone_radius),
+        coverage=COVERAGE,
+        bayes_estimate=functools.partial(bayes_optimal_estimate, zone_radius=zone_radius),
+    )(factory)
 
 
 _register("cheetah_dir_sparse", ZONE_RADIUS)

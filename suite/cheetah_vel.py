@@ -15,12 +15,14 @@ import numpy as np
 from dm_control.rl import control
 
 from hyperstate.suite._cheetah import (
+    COVERAGE,
     CTRL_COST_WEIGHT,
     EPISODE_LENGTH,
     ZONE_RADIUS,
     CheetahZoneBatch,
     CheetahZoneTask,
     environment,
+    position_axis,
 )
 from hyperstate.suite._registry import register
 from hyperstate.suite._seeding import SeedLike
@@ -152,9 +154,15 @@ def _register(name: str, zone_radius: float) -> None:
 
     # The sparse task's task-aware reference learns on the dense task (same observations and prior).
     reference = "cheetah_vel" if zone_radius > 0 else None
-    register(name, batch=batch_factory, metrics=metrics, position_keys=("x_displacement",), reference_task=reference)(
-        factory
-    )
+    register(
+        name,
+        batch=batch_factory,
+        metrics=metrics,
+        position_keys=("x_displacement",),
+        reference_task=reference,
+        position_axis=position_axis(zone_radius),
+        coverage=COVERAGE,
+    )(factory)
 
 
 _register("cheetah_vel_sparse", ZONE_RADIUS)

@@ -256,31 +256,88 @@ def test_sigkill_then_resume_equals_uninterrupted_run(tmp_path, tiny_config):
     assert strip_times(again) == strip_times(whole)
 
 
-def test_ray_executor_runs_a_tiny_grid_of_a_user_registered_preset(tmp_path, tiny_config):
-    """Ray workers import the user's file (--import) themselves, so its registrations reach them."""
+def test_ray_on_two_nodes_without_a_shared_out_survives_a_dead_node(tmp_path, tiny_config):
+    """A simulated two-node Ray cluster whose cells work in their own node's folders and keep checkpoints
+    in a storage apart from the driver's --out: the node running the cells dies mid-grid, a new node
+    joins, the cells resume there from the storage, and every number equals the local executor's. The
+    agent is a user-registered preset (--import): Ray workers import the user's file themselves."""
+    from ray.cluster_utils import Cluster
+
     user = tmp_path / "user_presets.py"
     user.write_text(
         'from hyperstate import agents\nagents.register_preset("user_oracle", agents.get_preset("oracle"))\n'
     )
-    out = tmp_path / "ray"
-    proc = run(
-        f"--import {user} --agents user_oracle --tasks cheetah_dir --seeds 0 1 --frames 200 --eval-tasks 2 "
-        f"--no-reference --config {tiny_config} --executor ray --out {out} --no-progress".split()
-    )
-    assert proc.returncode == 0, proc.stderr[-2000:]
-    records = json.loads((out / "results.json").read_text())
-    assert sorted(r["seed"] for r in records) == [0, 1] and all(r["complete"] for r in records)
-    assert {r["agent"] for r in records} == {"user_oracle"}
+    args = (
+        f"--import {user} --agents user_oracle --tasks cheetah_dir --seeds 0 1 --frames 1000 --eval-every 200 "
+        f"--eval-tasks 2 --no-reference --config {tiny_config} --no-progress"
+    ).split()
+    local = run(args + ["--out", tmp_path / "local", "--workers", "2"])
+    assert local.returncode == 0, local.stderr[-2000:]
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0})  # the driver's node runs no cell
+    try:
+        doomed = cluster.add_node(num_cpus=2)
+        out, storage = tmp_path / "ray_out", tmp_path / "storage"
+        driver = subprocess.Popen(
+            RUN
+            + args
+            + ["--executor", "ray", "--ray-address", cluster.address, "--out", str(out)]
+            + ["--storage", str(storage)],
+            env={**os.environ, "MUJOCO_GL": "disable"},
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        records = [storage / "cells" / f"user_oracle__cheetah_dir__s{seed}" / "record.json" for seed in (0, 1)]
+
+        def curve_lengths() -> list[int]:
+            lengths = []
+            for path in records:
+                record = json.loads(path.read_text()) if path.exists() else {"curve": [], "complete": False}
+                lengths.append(-1 if record["complete"] else len(record["curve"]))
+            return lengths
+
+        deadline = time.time() + 400
+        while time.time() < deadline and not any(n >= 1 for n in curve_lengths()):
+            time.sleep(0.1)  # kill the node once a cell has a checkpoint in the storage, mid-training
+        cluster.remove_node(doomed)
+        interrupted = [n for n in curve_lengths() if n >= 1]
+        assert interrupted, "the node died before any cell had checkpointed (or after all finished)"
+        cluster.add_node(num_cpus=2)
+        stdout, stderr = driver.communicate(timeout=600)
+        assert driver.returncode == 0, stderr[-3000:]
+    finally:
+        cluster.shutdown()
+    ray_results = json.loads((out / "results.json").read_text())
+    assert len(ray_results) == 2 and all(r["complete"] for r in ray_results)
+    assert strip_times(ray_results) == strip_times(json.loads((tmp_path / "local" / "results.json").read_text()))
+    # The driver's --out got every cell's files from the cells' returns, the checkpoints stayed in storage.
+    for seed in (0, 1):
+        cell = out / "cells" / f"user_oracle__cheetah_dir__s{seed}"
+        assert {"record.json", "agent.pt", "deployment.npz"} <= {p.name for p in cell.iterdir()}
+        assert len(list((cell / "snapshots").glob("agent_*.pt"))) == 5
+        assert not (cell / "checkpoint.pt").exists()
+        assert (storage / "cells" / cell.name / "checkpoint.pt").exists()
+        assert any((out / "tb" / cell.name).glob("events.out.tfevents.*"))
+
+
+def test_ray_storage_must_be_empty_unless_resuming(tmp_path):
+    (tmp_path / "storage" / "cells" / "some_cell").mkdir(parents=True)
+    common = f"--agents oracle --tasks cheetah_dir --frames 200 --executor ray --storage {tmp_path / 'storage'}"
+    proc = run(f"{common} --out {tmp_path / 'out'}".split())
+    assert proc.returncode == 2 and "holds cells of an earlier run" in proc.stderr
+    proc = run(f"--agents oracle --tasks cheetah_dir --frames 200 --storage {tmp_path} --out {tmp_path / 'o'}".split())
+    assert proc.returncode == 2 and "local executor works in --out" in proc.stderr
 
 
 # Beyond the paper: coverage, belief probe, Bayes-optimal estimate -----------------------------------
 def test_hyperstate_coverage_known_cases():
     from hyperstate.evaluation.coverage import HyperStateCoverage
 
-    still = HyperStateCoverage()
+    still = HyperStateCoverage.for_task("cheetah_dir_sparse")
     still.update({"x_displacement": np.full((200, 4, 1), 0.3), "belief": np.full((200, 4, 2), 0.5)})
     assert still.fraction() == pytest.approx(1 / (40 * 3))  # a policy that stands still covers one cell
-    sweep = HyperStateCoverage()
+    sweep = HyperStateCoverage.for_task("cheetah_dir_sparse")
     x = np.linspace(-19.9, 19.9, 400)[:, None, None]
     sweep.update({"x_displacement": x, "belief": np.tile([0.0, 1.0], (400, 1, 1))})
     assert sweep.visited[:, 2].all() and not sweep.visited[:, :2].any()
@@ -323,7 +380,7 @@ def test_bayes_optimal_estimate_by_hand():
     got = bayes_optimal_estimate(np.array([300.0, 50.0, -10.0]), zone_radius=5.0)
     assert got == pytest.approx(((300 - 100) + (50 - 25) + (-10)) / 3)  # detour 2 * 5 m / 0.05 s = 200
     # The report asks the task: only cheetah-direction tasks define the estimate.
-    assert suite.load("cheetah_dir_sparse", seed=0).task.bayes_optimal_estimate([300.0]) == pytest.approx(200.0)
+    assert suite.bayes_estimate("cheetah_dir_sparse")([300.0]) == pytest.approx(200.0)
 
 
 class _GaitFollower:

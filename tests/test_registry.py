@@ -144,3 +144,120 @@ def test_spawn_seeds_are_reproducible():
     assert len({tuple(s.generate_state(2)) for s in a}) == 3
     gen = suite.as_generator(np.random.SeedSequence(5))
     assert [s.generate_state(1)[0] for s in suite.spawn_seeds(gen, 3)] == [s.generate_state(1)[0] for s in a]
+
+
+# What the evaluation harness knows of a task, it learns from the task's declarations -------------------
+SLIDER_AXIS = suite.PositionAxis("position", "cart position (m)", symbol="x", unit="m", region=(-0.5, 0.5))
+
+
+@pytest.fixture
+def declared_slider(slider_task):
+    """The slider again, declaring a position axis, a coverage grid and a Bayes-optimal estimator."""
+    factory = suite._registry._REGISTRY[slider_task].factory
+    suite.register(
+        "test_slider_declared",
+        position_axis=SLIDER_AXIS,
+        coverage=suite.Coverage("position", low=-1.0, high=1.0, bins=4, belief_bins=2),
+        bayes_estimate=lambda returns: float(np.mean(returns)) - 1.0,
+    )(factory)
+    yield "test_slider_declared"
+    suite.unregister("test_slider_declared")
+
+
+def _records(task):
+    def record(agent, seed, per_task):
+        return {
+            "agent": agent,
+            "task": task,
+            "seed": seed,
+            "curve": [],
+            "final": {"online_return": float(np.mean(per_task)), "online_return_per_task": per_task},
+        }
+
+    return [record("task_aware", 0, [4.0, 6.0]), record("mine", 0, [1.0, 2.0])]
+
+
+def test_a_task_gets_coverage_plots_captions_and_bayes_estimate_only_by_declaring_them(
+    slider_task, declared_slider, tmp_path
+):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hyperstate.evaluation import grid, report
+    from hyperstate.evaluation.coverage import HyperStateCoverage
+
+    # Coverage: the declared grid, cells computed from the declared observation.
+    assert HyperStateCoverage.for_task(slider_task) is None
+    coverage = HyperStateCoverage.for_task(declared_slider)
+    coverage.update({"position": np.array([[[-0.9]], [[0.9]], [[5.0]]]), "belief": np.full((3, 1, 2), 0.5)})
+    assert coverage.visited.tolist() == [[False, True], [False, False], [False, False], [False, True]]
+    # Bayes-optimal estimate: the declared function of the reference's returns per deployment.
+    rows = {(r["task"], r["agent"]): r for r in report.summary_rows(_records(slider_task) + _records(declared_slider))}
+    assert rows[(declared_slider, "mine")]["bayes_estimate"] == pytest.approx(4.0)
+    assert rows[(declared_slider, "mine")]["gap_to_bayes"] == pytest.approx(2.5)
+    assert rows[(slider_task, "mine")]["bayes_estimate"] is None
+    # Behaviour plot: drawn along the declared axis from the saved deployment, none without an axis.
+    figures = tmp_path / "figures"
+    figures.mkdir()
+    for task in (slider_task, declared_slider):
+        record = {"agent": "mine", "task": task, "seed": 0}
+        directory = grid.cell_dir(tmp_path, grid.record_cell_id(record))
+        directory.mkdir(parents=True)
+        positions = np.linspace(0, 1, 80).reshape(40, 2, 1)
+        np.savez(directory / grid.DEPLOYMENT, obs_position=positions, tasks=np.array([[-1.0], [1.0]]))
+        drawn = report._behaviour_plot(tmp_path, record, figures, plt)
+        assert (drawn is not None) == (task == declared_slider)
+    # Captions: the declared axis in words, its region named.
+    assert SLIDER_AXIS.describe(0.2) == "x +0.2 m (inside region)"
+    assert SLIDER_AXIS.describe(-0.5) == "x -0.5 m (outside region)"
+    with pytest.raises(ValueError, match="low < high"):
+        suite.PositionAxis("position", "p", region=(1.0, -1.0))
+    with pytest.raises(TypeError, match="suite.Coverage"):
+        suite.register("bad_coverage", coverage=("position", 0, 1))(lambda seed=None: None)
+
+
+def _words_in_code(source: str, words: set[str]) -> list[str]:
+    """Identifiers and strings of `source` (docstrings aside) that contain one of `words`."""
+    import ast
+
+    tree = ast.parse(source)
+    docstrings = {
+        id(node.body[0].value)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Module | ast.ClassDef | ast.FunctionDef | ast.AsyncFunctionDef)
+        and node.body
+        and isinstance(node.body[0], ast.Expr)
+        and isinstance(node.body[0].value, ast.Constant)
+    }
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant):
+            text = node.value if id(node) not in docstrings else None
+        elif isinstance(node, ast.FunctionDef | ast.ClassDef):
+            text = node.name
+        else:
+            text = getattr(node, "id", None) or getattr(node, "attr", None) or getattr(node, "arg", None)
+        if isinstance(text, str) and any(word in text.lower() for word in words):
+            found.append(f"{node.lineno}: {text[:60]!r}")
+    return found
+
+
+def test_the_evaluation_harness_names_no_task():
+    """No identifier or string in evaluation/'s code (docstrings aside: they may show a command line)
+    names a built-in task, its observations or its attributes: the harness reads declarations only."""
+    from pathlib import Path
+
+    import hyperstate.evaluation as evaluation
+
+    banned = {*suite.TASKS, "cheetah", "point_robot", "quadruped", "x_displacement", "zone_radius", "bayes_optimal"}
+    found = {
+        path.name: hits
+        for path in sorted(Path(evaluation.__file__).parent.glob("*.py"))
+        if (hits := _words_in_code(path.read_text(), banned))
+    }
+    assert not found, found
+    # The scan finds what it looks for, in code, and not in a docstring.
+    source = '"""Runs cheetah_dir."""\ndef run(zone_radius):\n    return load(f"{x}_cheetah", x_displacement)\n'
+    assert sorted(_words_in_code(source, banned)) == ["2: 'zone_radius'", "3: '_cheetah'", "3: 'x_displacement'"]
