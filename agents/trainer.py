@@ -72,6 +72,32 @@ def bonus_anneal_factor(bonus: BonusConfig, anneal_all: bool, progress: float) -
     return 1.0 if until is None else max(0.0, 1.0 - progress / until)
 
 
+class PhaseClock:
+    """Wall time per phase of an iteration, for the log's `time/<phase>` breakdown (seconds): `mark(name)`
+    charges the time since the previous mark to `name`. A few `perf_counter` calls per step; nothing
+    it measures feeds back into training, so results do not depend on it."""
+
+    PHASES = ("inference", "physics", "belief", "rollout", "bonus", "ppo", "belief_training")
+
+    def __init__(self) -> None:
+        self.totals = dict.fromkeys(self.PHASES, 0.0)
+        self.last = time.perf_counter()
+
+    def start(self) -> None:
+        self.last = time.perf_counter()
+
+    def mark(self, phase: str) -> None:
+        now = time.perf_counter()
+        self.totals[phase] += now - self.last
+        self.last = now
+
+    def lap(self) -> dict[str, float]:
+        """The breakdown since the previous lap, as log entries; starts the next one."""
+        out = {f"time/{phase}": seconds for phase, seconds in self.totals.items()}
+        self.totals = dict.fromkeys(self.PHASES, 0.0)
+        return out
+
+
 class TrajectoryBuffer:
     """Whole BAMDP episodes for belief training (FIFO, `capacity` trajectories)."""
 
@@ -225,6 +251,7 @@ class Trainer:
             policy.obs_spec,
         )
         self.checkpoint = Path(checkpoint_dir) / "checkpoint.pt" if checkpoint_dir else None
+        self.clock = PhaseClock()
 
     # The loop --------------------------------------------------------------------------------------
     def run(
@@ -262,6 +289,7 @@ class Trainer:
             if on_rollout is not None:
                 on_rollout(self.rollout.raw_obs)
             log = self.learn(iteration)
+            log.update(self.clock.lap())
             log.update(
                 iteration=iteration + 1,
                 frames=(iteration + 1) * frames_per_iteration,
@@ -312,6 +340,8 @@ class Trainer:
         obs, bstate, is_start, episode_return = carry.obs, carry.belief, carry.is_start, carry.episode_return
         r.belief_state0 = bstate
         completed: list[float] = []
+        clock = self.clock
+        clock.start()
         with torch.inference_mode():
             for t in range(p.rollout_length):
                 raw = policy._state_vector(obs)
@@ -323,7 +353,9 @@ class Trainer:
                 noise = torch.randn(mean.shape, generator=policy.generator)
                 action = mean + std * noise
                 value = policy.model.value(normalized, features)
+                clock.mark("inference")
                 out = state.env.step(action.numpy().astype(np.float64))
+                clock.mark("physics")
                 final = out.final_observation
                 next_raw = policy._state_vector(final)
                 reward = torch.as_tensor(out.reward, dtype=torch.float32)[:, None]
@@ -337,6 +369,7 @@ class Trainer:
                 if last.any():
                     r.next_values[t] = policy.model.value(policy._normalized(next_raw), next_features)
                     bnext = policy.belief.reset_where(bnext, torch.as_tensor(last), policy._tensors(out.observation))
+                clock.mark("belief")
                 for k, v in obs.items():
                     r.raw_obs[k][t] = v
                 episode_return = episode_return + out.reward
@@ -355,6 +388,7 @@ class Trainer:
                 r.bootstrap[t] = torch.as_tensor(out.discount, dtype=torch.float32)
                 r.starts[t] = torch.as_tensor(is_start)
                 obs, bstate, is_start = out.observation, bnext, last
+                clock.mark("rollout")
             final_value = policy.model.value(
                 policy._normalized(policy._state_vector(obs)), policy.belief.features(bstate)
             )
@@ -364,6 +398,7 @@ class Trainer:
             following = torch.cat([r.values[1:], final_value[None]])
             r.next_values.copy_(torch.where(lasts, r.next_values, following))
             r.bootstrap.copy_(torch.where(lasts, r.bootstrap, torch.ones_like(r.bootstrap)))
+        clock.mark("inference")
         state.carry = Carry(obs, bstate, is_start, episode_return)
         return completed
 
@@ -376,6 +411,7 @@ class Trainer:
         lasts = rollout.lasts.numpy().astype(bool)
         extrinsic = rollout.rewards.numpy().astype(np.float64)
         log: dict[str, Any] = {"reward/extrinsic_mean": float(extrinsic.mean())}
+        self.clock.start()
         if p.sampled_action_cost > 0:
             extrinsic = extrinsic - p.sampled_action_cost * self.excess_action_energy(rollout.actions.numpy())
         raw_bonuses = []
@@ -427,7 +463,9 @@ class Trainer:
         )
         rollout.advantages.copy_(torch.as_tensor(advantages, dtype=torch.float32))
         rollout.returns.copy_(torch.as_tensor(returns, dtype=torch.float32))
+        self.clock.mark("bonus")  # bonuses, eq. (4) and GAE
         log.update(ppo_update(policy.model, policy.belief, state.optimizer, rollout, p, policy.generator))
+        self.clock.mark("ppo")
         if policy.belief.trainable:
             self.store_trajectories(lasts)
             if state.trajectories.items:
@@ -436,6 +474,7 @@ class Trainer:
                     for _ in range(cfg.vae.updates_per_iteration)
                 ]
                 log.update({k: float(np.mean([x[k] for x in losses])) for k in losses[0]})
+        self.clock.mark("belief_training")
         return log
 
     def excess_action_energy(self, actions: np.ndarray) -> np.ndarray:

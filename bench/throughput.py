@@ -4,7 +4,9 @@
 
 Reports training frames/s of the full loop (rollout, bonuses, PPO, belief updates), raw physics
 frames/s for the same number of control steps on `mujoco.batch.Batch` with the same number of envs and
-threads, their ratio, and a breakdown of the training time (collection vs learning).
+threads, their ratio, and a breakdown of the training time: seconds per phase over the run (the
+trainer's `time/<phase>` log: policy inference, physics, belief updates, rollout bookkeeping, bonuses +
+reward combination + GAE, PPO epochs, belief training) and each phase's share.
 """
 
 from __future__ import annotations
@@ -53,6 +55,11 @@ def main() -> None:
         "train_over_raw_physics": round(train_fps / physics_fps, 3),
         "collect_share_of_time": round(train_fps / collect_fps, 3),
     }
+    seconds = {k.removeprefix("time/"): sum(e[k] for e in log) for k in log[0] if k.startswith("time/")}
+    total = log[-1]["wall_seconds"]
+    result["seconds_per_phase"] = {k: round(v, 2) for k, v in seconds.items()}
+    result["share_per_phase"] = {k: round(v / total, 3) for k, v in seconds.items()}
+    result["share_unaccounted"] = round(1 - sum(seconds.values()) / total, 3)
     out = args.out or Path(f"bench/results/throughput_{args.preset}.json")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")

@@ -15,7 +15,6 @@ import subprocess
 import sys
 import zipfile
 from collections import OrderedDict
-from importlib import metadata
 from pathlib import Path
 
 import numpy as np
@@ -283,7 +282,19 @@ def test_the_lock_is_what_make_installed():
         if line:
             name, version = line.split("==")
             locked[_normalise(name)] = version
-    installed = {_normalise(d.metadata["Name"]): d.version.split("+")[0] for d in metadata.distributions()}
+    # In a fresh interpreter: an imported Ray puts its vendored packages (psutil, colorama) on sys.path.
+    listing = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "import json; from importlib import metadata; "
+            "print(json.dumps([[d.metadata['Name'], d.version] for d in metadata.distributions()]))",
+        ],
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    installed = {_normalise(name): version.split("+")[0] for name, version in json.loads(listing.stdout)}
     installed.pop("hyperstate")
     assert installed == locked
     assert locked["torch"] == "2.13.0" and locked["mujoco"] == "3.17.0" and locked["dm-control"] == "1.0.50"
