@@ -459,6 +459,16 @@ def test_figure_2_config_is_valid():
     assert overrides["oracle_rh_prior10"]["bonuses.0.updates_per_iteration"] == 4
     assert all(o["ppo.entropy_coef"] == 0.01 for o in overrides.values())
     assert all(o["physics_threads"] == 1 for o in overrides.values())
+    # The reference-code rows (bench/reproduce_fig2_icml.sh) run the `_icml` presets unchanged.
+    icml = (ROOT / "bench" / "reproduce_fig2_icml.sh").read_text()
+    icml_presets = next(line for line in icml.splitlines() if "--agents" in line).split("--agents")[1].split("--")[0]
+    args = parse_args(
+        ["--agents", *icml_presets.split(), "--tasks", "cheetah_dir_sparse", "--frames", "1000", "--out", "unused"]
+        + ["--config", str(ROOT / "bench" / "fig2_icml.toml"), "--no-reference"]
+    )
+    names, overrides = build_grid(args)
+    assert names == ["hyperx_icml", "oracle_rh_icml"]
+    assert all(o == {"physics_threads": 1} for o in overrides.values())
 
 
 def test_grid_layout_owns_cell_names_and_paths(tmp_path):
