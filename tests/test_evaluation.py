@@ -471,6 +471,27 @@ def test_figure_2_config_is_valid():
     assert all(o == {"physics_threads": 1} for o in overrides.values())
 
 
+@pytest.mark.parametrize("path", sorted((ROOT / "bench" / "turnaround").glob("*.toml")), ids=lambda p: p.stem)
+def test_turnaround_configs_apply_on_top_of_the_figure_2_config(path):
+    """Each campaign config (docs/turnaround.md) names real fields and changes what it says it changes."""
+    from hyperstate.evaluation.run import build_grid, parse_args
+
+    base = ["--agents", "oracle_rh", "--tasks", "cheetah_dir_sparse", "--frames", "1000", "--out", "unused"]
+    base += ["--import", str(ROOT / "bench" / "fig2_presets.py")]  # fig2.toml has a table for its extra row
+    try:
+        _, plain = build_grid(parse_args(base + ["--config", str(ROOT / "bench" / "fig2.toml")]))
+        _, changed = build_grid(parse_args(base + ["--config", str(ROOT / "bench" / "fig2.toml"), str(path)]))
+    finally:
+        agents.PRESETS.pop("oracle_rh_prior10", None)
+        sys.modules.pop("fig2_presets", None)
+    added = {k: v for k, v in changed["oracle_rh"].items() if plain["oracle_rh"].get(k) != v}
+    assert added, f"{path.name} changes nothing"
+    config = agents.make("oracle_rh", **changed["oracle_rh"]).config
+    for key, value in added.items():
+        section, field = key.split(".")
+        assert getattr(getattr(config, section), field) == value
+
+
 def test_grid_layout_owns_cell_names_and_paths(tmp_path):
     from hyperstate.evaluation import grid
 
