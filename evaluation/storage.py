@@ -2,7 +2,7 @@
 
 A Ray cell (evaluation/remote.py) works in a folder of its own node and copies what it writes — its
 folder `cells/<cell>/` and its tensorboard folder `tb/<cell>/`, under the same relative paths as in
-`--out` (evaluation/grid.py) — to the storage as it goes, checkpoint first. A cell that starts (again, on
+`--out` (evaluation/grid.py) — to the storage as it goes, checkpoint last. A cell that starts (again, on
 any node: after a node died, or on `--resume`) first copies back what the storage holds and resumes from
 it. The storage is a local or mounted path by default (then `--out` itself) or a URI such as
 `s3://bucket/grids/fig2` or `gs://…` (with `s3fs` or `gcsfs` installed).
@@ -52,7 +52,8 @@ class CellStore:
         self._copied: dict[str, tuple[int, int]] = {}  # relative path -> (mtime_ns, size) last pushed or pulled
 
     def local_files(self, workdir: Path) -> list[Path]:
-        """The cell's files under `workdir`, checkpoint first."""
+        """The cell's files under `workdir` in the order they are copied: the record second to last, the
+        checkpoint last."""
         files = [
             p
             for folder in cell_paths(self.cell)
@@ -60,9 +61,13 @@ class CellStore:
             for p in (workdir / folder).rglob("*")
             if p.is_file() and not p.name.startswith(".")  # temp files being written
         ]
-        # The checkpoint first: every other file copied after it is at least as new, so a record never
-        # lags the checkpoint it resumes from (a record ahead is fine: the point is evaluated again).
-        return sorted(files, key=lambda p: (p.name != CHECKPOINT, str(p)))
+        # The files do not change while they are copied (the cell copies them itself, between iterations),
+        # and locally a checkpoint never runs ahead of the record and snapshots written before it. Copying
+        # the checkpoint last keeps that in the storage whenever a node dies mid-copy: a resumed cell then
+        # starts from a checkpoint whose evaluation points and snapshots are all stored (a record or a
+        # snapshot ahead of it is fine: those points are evaluated and saved again, identically).
+        last = {grid.RECORD: 1, CHECKPOINT: 2}
+        return sorted(files, key=lambda p: (last.get(p.name, 0), str(p)))
 
     def pull(self, workdir: Path) -> list[str]:
         """Copies the cell's stored files into `workdir`; returns their relative paths."""

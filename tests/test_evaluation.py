@@ -321,6 +321,31 @@ def test_ray_on_two_nodes_without_a_shared_out_survives_a_dead_node(tmp_path, ti
         assert any((out / "tb" / cell.name).glob("events.out.tfevents.*"))
 
 
+def test_cell_store_copies_the_checkpoint_last_and_only_what_changed(tmp_path):
+    """A node dying mid-copy must never leave a stored checkpoint ahead of the stored record and
+    snapshots (a resumed cell would skip their evaluation points)."""
+    from hyperstate.evaluation.storage import CellStore
+
+    cell, work, storage = "a__t__s0", tmp_path / "work", tmp_path / "storage"
+    folder = work / "cells" / cell
+    (folder / "snapshots").mkdir(parents=True)
+    for name in ("checkpoint.pt", "record.json", "coverage.npy", "snapshots/agent_000000200.pt"):
+        (folder / name).write_text(name)
+    (work / "tb" / cell).mkdir(parents=True)
+    (work / "tb" / cell / "events").write_text("e")
+    store = CellStore(str(storage), cell)
+    order = [str(p.relative_to(work)) for p in store.local_files(work)]
+    assert order[-2:] == [f"cells/{cell}/record.json", f"cells/{cell}/checkpoint.pt"] and len(order) == 5
+    assert store.push(work) == 5 and store.push(work) == 0  # unchanged files are not copied again
+    (folder / "record.json").write_text("newer record")
+    assert store.push(work) == 1
+    # A copy a dying node left unfinished is ignored; the rest comes back.
+    (storage / "cells" / cell / "checkpoint.pt.part").write_text("half")
+    again = tmp_path / "again"
+    pulled = CellStore(str(storage), cell).pull(again)
+    assert sorted(pulled) == sorted(order) and (again / "cells" / cell / "record.json").read_text() == "newer record"
+
+
 def test_ray_storage_must_be_empty_unless_resuming(tmp_path):
     (tmp_path / "storage" / "cells" / "some_cell").mkdir(parents=True)
     common = f"--agents oracle --tasks cheetah_dir --frames 200 --executor ray --storage {tmp_path / 'storage'}"
