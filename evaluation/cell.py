@@ -67,34 +67,24 @@ class CellSpec:
         return grid.cell_dir(Path(self.out), self.cell_id)
 
 
-def write_json_atomic(path: Path, data: Any) -> None:
+def write_bytes_atomic(path: Path, data: bytes) -> None:
     """Writes through a temporary file of a unique name: concurrent writers never share it."""
     import tempfile
 
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         os.fchmod(fd, 0o644)  # mkstemp makes it private; results are for everyone to read
-        with os.fdopen(fd, "w") as f:
-            f.write(json.dumps(data, indent=1, default=_json_default))
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
-
-def write_bytes_atomic(path: Path, data: bytes) -> None:
-    """Writes bytes through a temporary file of a unique name (see `write_json_atomic`)."""
-    import tempfile
-
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        os.fchmod(fd, 0o644)
         with os.fdopen(fd, "wb") as f:
             f.write(data)
         os.replace(tmp, path)
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+def write_json_atomic(path: Path, data: Any) -> None:
+    """`data` as JSON, written atomically (`write_bytes_atomic`)."""
+    write_bytes_atomic(path, json.dumps(data, indent=1, default=_json_default).encode())
 
 
 def report_failure(spec: CellSpec, error: BaseException) -> str:

@@ -141,6 +141,22 @@ def _deploy(agent, task, tasks, episodes_per_task, seed, deterministic) -> Deplo
     )
 
 
+def exploration_metric_means(
+    task: str, observations: dict[str, np.ndarray], rewards: np.ndarray, tasks: np.ndarray
+) -> dict[str, float | None] | None:
+    """The task's declared exploration metrics of M deployments, each averaged over the deployments where
+    it is defined (None where it is nowhere); None if the task declares none."""
+    declared = suite.exploration_metrics(task)
+    if declared is None:
+        return None
+    means = {}
+    for name, values in declared(observations, rewards, tasks).items():
+        values = np.asarray(values, dtype=float)
+        finite = values[np.isfinite(values)]
+        means[name] = float(finite.mean()) if len(finite) else None
+    return means
+
+
 def deployment_metrics(deployment: Deployment, task: str, probe: bool = False) -> dict:
     """Online return (mean over tasks), per-episode returns, the task's exploration metrics and, with
     `probe`, the belief-quality probe (tasks with an exact belief)."""
@@ -150,14 +166,10 @@ def deployment_metrics(deployment: Deployment, task: str, probe: bool = False) -
         "online_return_per_task": returns.tolist(),
         "episode_returns": deployment.episode_returns().mean(1).tolist(),
     }
-    declared = suite.exploration_metrics(task)
+    declared = exploration_metric_means(task, deployment.observations, deployment.rewards, deployment.tasks)
     if declared is not None:
-        values = declared(deployment.observations, deployment.rewards, deployment.tasks)
-        metrics["exploration_metric_names"] = sorted(values)
-        for name, v in values.items():
-            v = np.asarray(v, dtype=float)
-            finite = v[np.isfinite(v)]
-            metrics[name] = float(finite.mean()) if len(finite) else None
+        metrics["exploration_metric_names"] = sorted(declared)
+        metrics.update(declared)
     if probe and deployment.exact_belief is not None and deployment.rewards.shape[1] >= 2:
         metrics.update(belief_quality(deployment.features, deployment.exact_belief))
     return metrics

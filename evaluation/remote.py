@@ -60,8 +60,7 @@ def run_cell_remotely(spec: CellSpec, board=None) -> tuple[dict, dict[str, bytes
                 board.report.remote(spec.cell_id, json.loads(progress_file.read_text()))
 
         record = run_cell(local, sync=sync)
-        sync()
-        store.push(workdir)
+        store.push(workdir)  # everything, the final progress included (the driver gets it with the files)
         files = {
             str(path.relative_to(workdir)): path.read_bytes()
             for path in store.local_files(workdir)

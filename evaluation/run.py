@@ -394,6 +394,10 @@ def main(argv: list[str] | None = None) -> int:
     started = time.perf_counter()
     try:
         if args.executor == "ray":
+            try:
+                import ray  # noqa: F401
+            except ImportError:
+                raise UsageError("--executor ray needs Ray: pip install '.[ray]'") from None
             from hyperstate.evaluation.remote import run_ray
 
             failures = run_ray(specs, args.ray_address, not args.no_progress, args.out)

@@ -24,6 +24,7 @@ from hyperstate.evaluation.deploy import (
     deploy,
     deployment_metrics,
     evaluation_tasks,
+    exploration_metric_means,
     reads_true_task,
 )
 from hyperstate.evaluation.probe import belief_quality
@@ -62,20 +63,14 @@ def upgrade_record(record: dict, directory: Path, episodes_per_task: int | None 
 
 
 def _task_metrics(record: dict, data) -> bool:
-    declared = suite.exploration_metrics(record["task"])
     final = record["final"]
-    if declared is None:
-        return False
     observations = {k.removeprefix("obs_"): data[k] for k in data.files if k.startswith("obs_")}
-    values = declared(observations, data["rewards"], data["tasks"])
-    missing = sorted(set(values) - set(final))
+    means = exploration_metric_means(record["task"], observations, data["rewards"], data["tasks"])
+    missing = sorted(set(means or ()) - set(final))
     if not missing:
         return False
-    for name in missing:
-        v = np.asarray(values[name], dtype=float)
-        finite = v[np.isfinite(v)]
-        final[name] = float(finite.mean()) if len(finite) else None
-    final["exploration_metric_names"] = sorted(values)
+    final.update({name: means[name] for name in missing})
+    final["exploration_metric_names"] = sorted(means)
     return True
 
 
