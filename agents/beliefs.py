@@ -309,10 +309,22 @@ class VariationalEncoder(nn.Module):
         )
 
     def step(self, h, action, reward, next_state):
-        """One transition for a batch: h (N, H) → (h', mean, logvar)."""
-        out, h = self.gru(self.embed(action, reward, next_state)[None], h[None])
-        mean, logvar = self.head(out[0]).chunk(2, dim=-1)
-        return h[0], mean, logvar
+        """One transition for a batch: h (N, H) → (h', mean, logvar).
+
+        The same computation as `sequence` over one step (identical results), written with plain
+        functions (`gru_cell`, `F.linear`): called once per rollout step, module overhead dominates it."""
+        embedded = torch.cat(
+            [
+                F.relu(F.linear(action, self.action_embed.weight, self.action_embed.bias)),
+                F.relu(F.linear(reward, self.reward_embed.weight, self.reward_embed.bias)),
+                F.relu(F.linear(next_state, self.state_embed.weight, self.state_embed.bias)),
+            ],
+            dim=-1,
+        )
+        gru = self.gru
+        h = torch.gru_cell(embedded, h, gru.weight_ih_l0, gru.weight_hh_l0, gru.bias_ih_l0, gru.bias_hh_l0)
+        mean, logvar = F.linear(h, self.head.weight, self.head.bias).chunk(2, dim=-1)
+        return h, mean, logvar
 
     def sequence(self, actions, rewards, next_states):
         """Posteriors of whole trajectories (B, T, ·) → mean, logvar of shape (B, T+1, latent), prior first."""

@@ -349,10 +349,9 @@ class Trainer:
                     policy.obs_stats.update(raw)
                 normalized = policy._normalized(raw)
                 features = policy.belief.features(bstate)
-                mean, std = policy.model.mean_std(normalized, features)
+                mean, std, value = policy.model.step(normalized, features)
                 noise = torch.randn(mean.shape, generator=policy.generator)
                 action = mean + std * noise
-                value = policy.model.value(normalized, features)
                 clock.mark("inference")
                 out = state.env.step(action.numpy().astype(np.float64))
                 clock.mark("physics")

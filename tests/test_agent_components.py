@@ -10,9 +10,9 @@ import torch
 from hyperstate import agents
 from hyperstate.agents.beliefs import RecurrentBelief, Trajectories, Transition, VariBADBelief, gaussian_kl
 from hyperstate.agents.bonuses import BonusInput, EnsembleRND, InputSelector
-from hyperstate.agents.config import BonusConfig, RecurrentConfig, VAEConfig, apply_overrides
+from hyperstate.agents.config import BonusConfig, PPOConfig, RecurrentConfig, VAEConfig, apply_overrides
 from hyperstate.agents.normalization import ReturnScaler, RunningMeanStd
-from hyperstate.agents.ppo import compute_gae
+from hyperstate.agents.ppo import ActorCritic, compute_gae
 
 
 # Normalisation -------------------------------------------------------------------------------------
@@ -261,3 +261,45 @@ def test_vae_error_bonus_is_the_reward_decoders_squared_error():
     torch.testing.assert_close(got, want.detach())
     with pytest.raises(ValueError, match="varibad"):
         VAEErrorBonus(RecurrentBelief(3, 2, RecurrentConfig()), "x")
+
+
+# The per-step fast path ------------------------------------------------------------------------------
+@pytest.mark.parametrize("embed", [32, 0])
+def test_actor_critic_step_equals_mean_std_and_value_exactly_through_training(embed):
+    # `step` runs the layers as plain functions over the modules' own parameters: it must give the very
+    # numbers of the module calls, and keep doing so after optimiser steps and load_state_dict.
+    torch.manual_seed(0)
+    model = ActorCritic(7, 4, 3, dataclasses.replace(PPOConfig(), embed=embed))
+    state, features = torch.randn(16, 7), torch.randn(16, 4)
+
+    def check():
+        mean, std, value = model.step(state, features)
+        expected_mean, expected_std = model.mean_std(state, features)
+        assert torch.equal(mean, expected_mean) and torch.equal(std, expected_std)
+        assert torch.equal(value, model.value(state, features))
+        assert value.shape == (16,) and mean.shape == (16, 3)
+
+    check()
+    optimizer = torch.optim.Adam(model.parameters(), lr=1e-2)
+    for _ in range(3):
+        mean, _ = model.mean_std(state, features)
+        (mean.square().sum() + model.value(state, features).square().sum()).backward()
+        optimizer.step()
+        optimizer.zero_grad()
+    check()
+    other = ActorCritic(7, 4, 3, dataclasses.replace(PPOConfig(), embed=embed))
+    model.load_state_dict(other.state_dict())
+    check()
+    assert torch.equal(model.step(state, features)[0], other.mean_std(state, features)[0])
+
+
+def test_vae_encoder_step_equals_the_gru_module_exactly():
+    torch.manual_seed(0)
+    encoder = VariBADBelief(3, 2, VAEConfig(), torch.Generator().manual_seed(0)).encoder
+    h = torch.randn(16, encoder.hidden)
+    action, reward, next_state = torch.randn(16, 2), torch.randn(16, 1), torch.randn(16, 3)
+    out, expected_h = encoder.gru(encoder.embed(action, reward, next_state)[None], h[None])
+    expected_mean, expected_logvar = encoder.head(out[0]).chunk(2, dim=-1)
+    new_h, mean, logvar = encoder.step(h, action, reward, next_state)
+    assert torch.equal(new_h, expected_h[0])
+    assert torch.equal(mean, expected_mean) and torch.equal(logvar, expected_logvar)
