@@ -6,7 +6,8 @@ Reports training frames/s of the full loop (rollout, bonuses, PPO, belief update
 frames/s for the same number of control steps on `mujoco.batch.Batch` with the same number of envs and
 threads, their ratio, and a breakdown of the training time: seconds per phase over the run (the
 trainer's `time/<phase>` log: policy inference, physics, belief updates, rollout bookkeeping, bonuses +
-reward combination + GAE, PPO epochs, belief training) and each phase's share.
+reward combination + GAE, PPO epochs, belief training) and each phase's share, and the physics phase's
+own frames/s (the task's env steps inside the loop, resets and reward included).
 """
 
 from __future__ import annotations
@@ -60,6 +61,8 @@ def main() -> None:
     result["seconds_per_phase"] = {k: round(v, 2) for k, v in seconds.items()}
     result["share_per_phase"] = {k: round(v / total, 3) for k, v in seconds.items()}
     result["share_unaccounted"] = round(1 - sum(seconds.values()) / total, 3)
+    # Physics as the loop runs it: settled random starts and learned gaits (bench/physics_state_probe.py).
+    result["loop_physics_frames_per_second"] = round(frames / seconds["physics"])
     out = args.out or Path(f"bench/results/throughput_{args.preset}.json")
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps(result, indent=2) + "\n")
