@@ -1,0 +1,49 @@
+"""The throughput benchmarks run and write what they promise (numbers are never asserted, only checked)."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def bench(script: str, *args, out: Path) -> dict:
+    env = {**os.environ, "MUJOCO_GL": "disable"}
+    subprocess.run(
+        [sys.executable, str(ROOT / "bench" / script), *map(str, args), "--out", str(out)],
+        check=True, capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
+    )  # fmt: skip
+    return json.loads(out.read_text())
+
+
+def test_step_path_probe_finds_the_function_and_module_paths_identical(tmp_path):
+    result = bench("step_path_probe.py", "--rounds", 2, out=tmp_path / "step.json")
+    assert result["identical_rollouts"] is True  # whole rollouts, bit for bit
+    assert set(result["collect_frames_per_second"]) == {"functions", "modules"}
+    assert all(v > 0 for v in result["collect_frames_per_second"].values())
+    assert result["frames_per_rollout"] == 16 * 200
+
+
+def test_throughput_reports_phases_and_loop_physics(tmp_path):
+    result = bench("throughput.py", "--preset", "oracle", "--frames", 6400, out=tmp_path / "tp.json")
+    assert result["frames"] == 6400
+    phases = result["share_per_phase"]
+    assert {"physics", "inference", "ppo"} <= set(phases)
+    assert abs(sum(phases.values()) + result["share_unaccounted"] - 1) < 0.01
+    # The JSON rounds seconds to 0.01 s: the rate must lie within what that rounding allows.
+    physics_seconds = result["seconds_per_phase"]["physics"]
+    low, high = 6400 / (physics_seconds + 0.005), 6400 / max(physics_seconds - 0.005, 1e-3)
+    assert low - 1 <= result["loop_physics_frames_per_second"] <= high + 1
+
+
+def test_physics_state_probe_covers_its_regimes(tmp_path):
+    result = bench("physics_state_probe.py", "--episodes", 1, out=tmp_path / "physics.json")
+    assert set(result["control_frames_per_second_median"]) == {
+        "default_pose_uniform_actions",
+        "settled_pose_uniform_actions",
+        "settled_pose_bang_bang_actions",
+        "settled_pose_periodic_gait",
+    }
+    assert result["settling_over_episode_steps_median"] > 0
