@@ -77,7 +77,7 @@ class PhaseClock:
     charges the time since the previous mark to `name`. A few `perf_counter` calls per step; nothing
     it measures feeds back into training, so results do not depend on it."""
 
-    PHASES = ("inference", "physics", "belief", "rollout", "bonus", "ppo", "belief_training")
+    PHASES = ("inference", "physics", "belief", "rollout", "bonus", "returns", "ppo", "belief_training")
 
     def __init__(self) -> None:
         self.totals = dict.fromkeys(self.PHASES, 0.0)
@@ -426,6 +426,7 @@ class Trainer:
             for bonus in policy.bonuses:
                 raw_bonuses.append(bonus.reward(flat).numpy().astype(np.float64).reshape(t_len, n))
                 log.update(bonus.update(flat))
+        self.clock.mark("bonus")  # the bonuses' rewards and their networks' updates
         anneals = [bonus_anneal_factor(b, cfg.anneal_bonus, iteration / self.iterations) for b in cfg.bonuses]
         reward, scaled_bonuses = combine_rewards(
             extrinsic,
@@ -462,7 +463,7 @@ class Trainer:
         )
         rollout.advantages.copy_(torch.as_tensor(advantages, dtype=torch.float32))
         rollout.returns.copy_(torch.as_tensor(returns, dtype=torch.float32))
-        self.clock.mark("bonus")  # bonuses, eq. (4) and GAE
+        self.clock.mark("returns")  # eq. (4) and GAE
         log.update(ppo_update(policy.model, policy.belief, state.optimizer, rollout, p, policy.generator))
         self.clock.mark("ppo")
         if policy.belief.trainable:

@@ -5,7 +5,7 @@
 Reports training frames/s of the full loop (rollout, bonuses, PPO, belief updates), raw physics
 frames/s for the same number of control steps on `mujoco.batch.Batch` with the same number of envs and
 threads, their ratio, and a breakdown of the training time: seconds per phase over the run (the
-trainer's `time/<phase>` log: policy inference, physics, belief updates, rollout bookkeeping, bonuses +
+trainer's `time/<phase>` log: policy inference, physics, belief updates, rollout bookkeeping, bonuses,
 reward combination + GAE, PPO epochs, belief training) and each phase's share, and the physics phase's
 own frames/s (the task's env steps inside the loop, resets and reward included).
 """

@@ -6,6 +6,7 @@ import torch
 
 from hyperstate import agents, suite
 from hyperstate.agents.beliefs import make_belief
+from hyperstate.agents.trainer import PhaseClock
 
 TINY = {
     "ppo.num_envs": 4,
@@ -98,6 +99,7 @@ def test_resume_from_checkpoint_equals_uninterrupted_run(preset, tmp_path):
     assert without_times(whole_log) == without_times(resumed_log)
     # The time breakdown covers the iteration: its phases sum to (almost) all of it.
     first = whole_log[1]
+    assert {k for k in first if k.startswith("time/")} == {f"time/{phase}" for phase in PhaseClock.PHASES}
     phases = sum(v for k, v in first.items() if k.startswith("time/"))
     iteration_seconds = (first["frames"] - whole_log[0]["frames"]) / first["fps"]
     assert 0.5 * iteration_seconds < phases <= iteration_seconds * 1.01
