@@ -5,8 +5,11 @@
 For every finished cell: the final online return, returns on forward / backward tasks, the share of
 deployments whose first exit was on the wrong side, the share of those that ended beyond the zone on the
 right side (`turned_around`), their mean return, correct direction, stuck, the stochastic policy's return
-where recorded, the curve every 2M frames, and each deployment's final x. Computed from each cell's
-`deployment.npz` with the task's own metrics (`suite.exploration_metrics`), so older grids work too.
+where recorded, the curve every 2M frames, and each deployment's final x; and two numbers for the
+direction asymmetry (docs/turnaround.md): the share of deployments whose first exit was forward, and the
+mean speed of the way back on wrong-first deployments (m/s towards the rewarded side, from the furthest
+point on the wrong side to the end of the episode). Computed from each cell's `deployment.npz` with the
+task's own metrics (`suite.exploration_metrics`), so older grids work too.
 """
 
 from __future__ import annotations
@@ -19,6 +22,26 @@ from pathlib import Path
 import numpy as np
 
 from hyperstate import suite
+from hyperstate.suite.cheetah_dir import CONTROL_TIMESTEP, ZONE_RADIUS
+
+
+def exits_and_way_back(x: np.ndarray, directions: np.ndarray) -> tuple[float, float]:
+    """(share of deployments whose first exit from the zone was forward, mean speed in m/s of the way back
+    on deployments whose first exit was on the wrong side; NaN where none), from (T, N) x-displacements
+    and (N,) task directions (±1)."""
+    outside = np.abs(x) >= ZONE_RADIUS
+    left = outside.any(axis=0)
+    first = np.argmax(outside, axis=0)
+    side = np.sign(x[first, np.arange(x.shape[1])])
+    wrong = left & (side != directions)
+    speeds = []
+    for i in np.flatnonzero(wrong):
+        turn = int(np.argmax(-directions[i] * x[:, i]))  # the furthest point on the wrong side
+        steps = x.shape[0] - 1 - turn
+        if steps > 0:
+            speeds.append(directions[i] * (x[-1, i] - x[turn, i]) / (steps * CONTROL_TIMESTEP))
+    forward_first = float(np.mean(side[left] > 0)) if left.any() else float("nan")
+    return forward_first, float(np.mean(speeds)) if speeds else float("nan")
 
 
 def cell_rows(out: Path) -> list[dict]:
@@ -37,6 +60,7 @@ def cell_rows(out: Path) -> list[dict]:
         with warnings.catch_warnings():  # a metric that applies to no deployment is NaN
             warnings.simplefilter("ignore", RuntimeWarning)
             means = {k: float(np.nanmean(v)) for k, v in metrics.items()}
+        forward_first, way_back = exits_and_way_back(data["obs_x_displacement"][..., 0], data["tasks"][:, 0])
         rows.append(
             {
                 "agent": record["agent"],
@@ -44,6 +68,8 @@ def cell_rows(out: Path) -> list[dict]:
                 "online_return": record["final"]["online_return"],
                 "stochastic_return": record["final"].get("stochastic", {}).get("online_return"),
                 **means,
+                "forward_first_exit": forward_first,
+                "way_back_speed": way_back,
                 "curve": [p["online_return"] for p in record["curve"]],
                 "final_x": data["obs_x_displacement"][-1, :, 0].tolist(),
                 "tasks": data["tasks"][:, 0].tolist(),
@@ -58,8 +84,8 @@ def markdown(rows: list[dict]) -> str:
 
     lines = [
         "| run | online return | R forward | R backward | wrong first | turned | R wrong-first | correct dir. | stuck "
-        "| stochastic | curve every 2M |",
-        "|---|---|---|---|---|---|---|---|---|---|---|",
+        "| stochastic | first exit forward | way back m/s | curve every 2M |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         curve = ", ".join(f(v) for v in r["curve"][1::2])
@@ -67,7 +93,8 @@ def markdown(rows: list[dict]) -> str:
             f"| `{r['agent']}` s{r['seed']} | {f(r['online_return'])} | {f(r['return_forward'])} | "
             f"{f(r['return_backward'])} | {f(r['wrong_first_exit'], '.2f')} | {f(r['turned_around'], '.2f')} | "
             f"{f(r['return_wrong_first'])} | {f(r['correct_direction'], '.2f')} | {f(r['stuck'], '.2f')} | "
-            f"{f(r['stochastic_return'])} | {curve} |"
+            f"{f(r['stochastic_return'])} | {f(r['forward_first_exit'], '.2f')} | {f(r['way_back_speed'], '.1f')} | "
+            f"{curve} |"
         )
     return "\n".join(lines)
 

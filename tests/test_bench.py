@@ -6,6 +6,9 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
+import pytest
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -47,3 +50,20 @@ def test_physics_state_probe_covers_its_regimes(tmp_path):
         "settled_pose_periodic_gait",
     }
     assert result["settling_over_episode_steps_median"] > 0
+
+
+def test_turnaround_summary_measures_first_exits_and_the_way_back():
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("turnaround_summary", ROOT / "bench" / "turnaround_summary.py")
+    summary = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(summary)
+    t = np.arange(201, dtype=float)
+    # Deployment 0, a forward task: out backwards to −7 m at step 40, then forward to +3 m at step 200.
+    wrong_first = np.where(t <= 40, -7 * t / 40, -7 + 10 * (t - 40) / 160)
+    # Deployment 1, a forward task: straight out forwards. Deployment 2, a backward task: never leaves.
+    right_first, stays = 0.3 * t, np.zeros_like(t)
+    x = np.stack([wrong_first, right_first, stays], axis=1)
+    forward_first, way_back = summary.exits_and_way_back(x, np.array([1.0, 1.0, -1.0]))
+    assert forward_first == 0.5  # of the two deployments that left the zone
+    assert way_back == pytest.approx(10 / (160 * summary.CONTROL_TIMESTEP))  # 10 m in 160 steps of 0.05 s
