@@ -53,11 +53,7 @@ def test_physics_state_probe_covers_its_regimes(tmp_path):
 
 
 def test_turnaround_summary_measures_first_exits_and_the_way_back():
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("turnaround_summary", ROOT / "bench" / "turnaround_summary.py")
-    summary = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(summary)
+    summary = _load_bench("turnaround_summary")
     t = np.arange(201, dtype=float)
     # Deployment 0, a forward task: out backwards to −7 m at step 40, then forward to +3 m at step 200.
     wrong_first = np.where(t <= 40, -7 * t / 40, -7 + 10 * (t - 40) / 160)
@@ -67,3 +63,43 @@ def test_turnaround_summary_measures_first_exits_and_the_way_back():
     forward_first, way_back = summary.exits_and_way_back(x, np.array([1.0, 1.0, -1.0]))
     assert forward_first == 0.5  # of the two deployments that left the zone
     assert way_back == pytest.approx(10 / (160 * summary.CONTROL_TIMESTEP))  # 10 m in 160 steps of 0.05 s
+
+
+def _load_bench(name: str):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(name, ROOT / "bench" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_learning_speed_compares_settings_at_equal_training_time():
+    speed = _load_bench("learning_speed")
+    # (frames, training seconds, online return): setting 16 takes 10 s for the budget, setting 64 only 5 s.
+    curves = {
+        16: [[(100, 2.0, 0.0), (200, 6.0, 40.0), (300, 10.0, 100.0)]],
+        64: [[(100, 1.0, 10.0), (200, 3.0, 30.0), (300, 5.0, 60.0)]],
+    }
+    summary = speed.summarise(curves)
+    assert summary["equal_time_seconds"] == 5.0
+    assert summary["half_best_final"] == 50.0
+    at16, at64 = summary["by_num_envs"]["16"], summary["by_num_envs"]["64"]
+    assert at16["online_return_at_equal_time"] == pytest.approx(30.0)  # between (2 s, 0) and (6 s, 40)
+    assert at64["online_return_at_equal_time"] == pytest.approx(60.0)
+    assert at16["seconds_to_half_best_final"] == 10.0 and at64["seconds_to_half_best_final"] == 5.0
+    assert at16["train_frames_per_second"] == pytest.approx(30.0) and at64["final_online_return"] == 60.0
+    assert speed.seconds_to_reach(curves[64][0], 61.0) is None
+
+
+def test_learning_speed_runs_end_to_end(tmp_path):
+    result = bench(
+        "learning_speed.py", "--preset", "oracle", "--num-envs", 2, 4, "--frames", 1600, "--eval-every", 800,
+        "--eval-tasks", 2, "--seeds", 0, out=tmp_path / "speed.json",
+    )  # fmt: skip
+    assert set(result["by_num_envs"]) == {"2", "4"}
+    for runs in result["curves"].values():
+        frames = [p[0] for p in runs[0]]
+        seconds = [p[1] for p in runs[0]]
+        assert frames == sorted(frames) and frames[-1] == 1600 and frames[0] >= 800
+        assert all(b > a for a, b in zip(seconds, seconds[1:], strict=False)) and seconds[0] > 0
