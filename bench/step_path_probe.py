@@ -1,6 +1,6 @@
 """Does the per-step path as plain functions pay? Rollout collection with it and with nn.Module calls.
 
-    python bench/step_path_probe.py [--preset hyperx] [--rounds 12] [--out FILE]
+    python bench/step_path_probe.py [--preset hyperx] [--rounds 12] [--num-envs 16] [--out FILE]
 
 The trainer's rollout calls `ActorCritic.step` (actor and critic layers as plain functions, one call)
 and, for variBAD beliefs, `VariationalEncoder.step` (`gru_cell` and `F.linear`). The module path is
@@ -51,10 +51,12 @@ def main() -> None:
     parser.add_argument("--preset", default="hyperx")
     parser.add_argument("--task", default="cheetah_dir_sparse")
     parser.add_argument("--rounds", type=int, default=12)
+    parser.add_argument("--num-envs", type=int, default=16)
     parser.add_argument("--out", type=Path, default=None, help="default bench/results/step_path_<preset>.json")
     args = parser.parse_args()
     # Two trainers built from one seed: the same state, each advanced by one path.
-    trainers = {name: Trainer(agents.make(args.preset, torch_threads=1), args.task, 10**8) for name in PATHS}
+    overrides = {"torch_threads": 1, "ppo.num_envs": args.num_envs}
+    trainers = {name: Trainer(agents.make(args.preset, **overrides), args.task, 10**8) for name in PATHS}
     seconds: dict[str, list[float]] = {name: [] for name in PATHS}
     identical = True
     try:

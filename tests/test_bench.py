@@ -22,22 +22,22 @@ def bench(script: str, *args, out: Path) -> dict:
 
 
 def test_step_path_probe_finds_the_function_and_module_paths_identical(tmp_path):
-    result = bench("step_path_probe.py", "--rounds", 2, out=tmp_path / "step.json")
+    result = bench("step_path_probe.py", "--rounds", 2, "--num-envs", 4, out=tmp_path / "step.json")
     assert result["identical_rollouts"] is True  # whole rollouts, bit for bit
     assert set(result["collect_frames_per_second"]) == {"functions", "modules"}
     assert all(v > 0 for v in result["collect_frames_per_second"].values())
-    assert result["frames_per_rollout"] == 16 * 200
+    assert result["frames_per_rollout"] == 4 * 200
 
 
 def test_throughput_reports_phases_and_loop_physics(tmp_path):
-    result = bench("throughput.py", "--preset", "oracle", "--frames", 6400, out=tmp_path / "tp.json")
-    assert result["frames"] == 6400
+    result = bench("throughput.py", "--preset", "oracle", "--num-envs", 4, "--frames", 1600, out=tmp_path / "tp.json")
+    assert result["frames"] == 1600
     phases = result["share_per_phase"]
     assert {"physics", "inference", "ppo"} <= set(phases)
     assert abs(sum(phases.values()) + result["share_unaccounted"] - 1) < 0.01
     # The JSON rounds seconds to 0.01 s: the rate must lie within what that rounding allows.
     physics_seconds = result["seconds_per_phase"]["physics"]
-    low, high = 6400 / (physics_seconds + 0.005), 6400 / max(physics_seconds - 0.005, 1e-3)
+    low, high = 1600 / (physics_seconds + 0.005), 1600 / max(physics_seconds - 0.005, 1e-3)
     assert low - 1 <= result["loop_physics_frames_per_second"] <= high + 1
 
 
@@ -94,12 +94,12 @@ def test_learning_speed_compares_settings_at_equal_training_time():
 
 def test_learning_speed_runs_end_to_end(tmp_path):
     result = bench(
-        "learning_speed.py", "--preset", "oracle", "--num-envs", 2, 4, "--frames", 1600, "--eval-every", 800,
+        "learning_speed.py", "--preset", "oracle", "--num-envs", 1, 2, "--frames", 800, "--eval-every", 400,
         "--eval-tasks", 2, "--seeds", 0, out=tmp_path / "speed.json",
     )  # fmt: skip
-    assert set(result["by_num_envs"]) == {"2", "4"}
+    assert set(result["by_num_envs"]) == {"1", "2"}
     for runs in result["curves"].values():
         frames = [p[0] for p in runs[0]]
         seconds = [p[1] for p in runs[0]]
-        assert frames == sorted(frames) and frames[-1] == 1600 and frames[0] >= 800
+        assert frames == sorted(frames) and frames[-1] == 800 and frames[0] >= 400
         assert all(b > a for a, b in zip(seconds, seconds[1:], strict=False)) and seconds[0] > 0
