@@ -1,0 +1,58 @@
+"""When does a run learn the turn-around? Deploy a cell's kept snapshots again and measure each.
+
+    .venv/bin/python bench/snapshot_turns.py runs/fig2_20m/cells/hyperx__cheetah_dir_sparse__s1 \
+        [--every 4] [--import bench/fig2_presets.py]
+
+Every `--every`-th agent in the cell's `snapshots/` (the harness keeps one per evaluation point) is
+loaded and deployed on the 20 held-out tasks with deterministic actions, as at the evaluation points;
+prints the online return and the task's turn-around metrics (`turned_around`, the mean return of the
+deployments whose first exit was wrong, `correct_direction`). Task: `cheetah_dir_sparse`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import runpy
+import warnings
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "disable")
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from hyperstate import agents, suite  # noqa: E402
+from hyperstate.evaluation.deploy import deploy, evaluation_tasks  # noqa: E402
+
+TASK = "cheetah_dir_sparse"
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("cell", type=Path)
+    parser.add_argument("--every", type=int, default=4)
+    parser.add_argument("--import", dest="imports", nargs="*", default=[], help="preset files the cell used")
+    args = parser.parse_args()
+    for path in args.imports:
+        runpy.run_path(path)
+    torch.set_num_threads(1)
+    tasks = evaluation_tasks(TASK, 20)
+    metrics_of = suite.exploration_metrics(TASK)
+    snapshots = sorted((args.cell / "snapshots").glob("agent_*.pt"))
+    for path in snapshots[args.every - 1 :: args.every]:
+        deployment = deploy(agents.Agent.load(path), TASK, tasks)
+        metrics = metrics_of(deployment.observations, deployment.rewards, deployment.tasks)
+        with warnings.catch_warnings():  # a metric that applies to no deployment is NaN
+            warnings.simplefilter("ignore", RuntimeWarning)
+            means = {k: float(np.nanmean(v)) for k, v in metrics.items()}
+        frames = int(path.stem.split("_")[1])
+        print(
+            f"{frames / 1e6:5.1f}M  online return {deployment.rewards.sum(0).mean():6.0f}  "
+            f"turned {means['turned_around']:.2f}  R wrong-first {means['return_wrong_first']:6.0f}  "
+            f"correct direction {means['correct_direction']:.2f}"
+        )
+
+
+if __name__ == "__main__":
+    main()
