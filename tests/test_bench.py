@@ -103,3 +103,21 @@ def test_learning_speed_runs_end_to_end(tmp_path):
         seconds = [p[1] for p in runs[0]]
         assert frames == sorted(frames) and frames[-1] == 800 and frames[0] >= 400
         assert all(b > a for a, b in zip(seconds, seconds[1:], strict=False)) and seconds[0] > 0
+
+
+def test_snapshot_turns_deploys_each_kept_agent(tmp_path):
+    from hyperstate import agents
+
+    agent = agents.make("oracle", **{"ppo.num_envs": 2})
+    agent.train("cheetah_dir_sparse", frames=400, progress=False)
+    (tmp_path / "snapshots").mkdir()
+    for frames in (400_000, 800_000):  # the harness names snapshots by frames
+        agent.save(tmp_path / "snapshots" / f"agent_{frames:09d}.pt")
+    env = {**os.environ, "MUJOCO_GL": "disable"}
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "snapshot_turns.py"), str(tmp_path), "--every", "1"],
+        check=True, capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
+    )  # fmt: skip
+    lines = [line for line in proc.stdout.splitlines() if "online return" in line]
+    assert [line.split()[0] for line in lines] == ["0.4M", "0.8M"]
+    assert all("turned" in line and "correct direction" in line for line in lines)
