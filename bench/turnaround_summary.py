@@ -22,25 +22,23 @@ from pathlib import Path
 import numpy as np
 
 from hyperstate import suite
-from hyperstate.suite.cheetah_dir import CONTROL_TIMESTEP, ZONE_RADIUS
+from hyperstate.suite.cheetah_dir import CONTROL_TIMESTEP
 
 
-def exits_and_way_back(x: np.ndarray, directions: np.ndarray) -> tuple[float, float]:
+def exits_and_way_back(x: np.ndarray, directions: np.ndarray, wrong_first_exit: np.ndarray) -> tuple[float, float]:
     """(share of deployments whose first exit from the zone was forward, mean speed in m/s of the way back
-    on deployments whose first exit was on the wrong side; NaN where none), from (T, N) x-displacements
-    and (N,) task directions (±1)."""
-    outside = np.abs(x) >= ZONE_RADIUS
-    left = outside.any(axis=0)
-    first = np.argmax(outside, axis=0)
-    side = np.sign(x[first, np.arange(x.shape[1])])
-    wrong = left & (side != directions)
+    on deployments whose first exit was on the wrong side; NaN where none), from (T, N) x-displacements,
+    (N,) task directions (±1) and the task's own per-deployment `wrong_first_exit` metric (NaN: never left)."""
+    left = ~np.isnan(wrong_first_exit)
+    wrong = left & (wrong_first_exit == 1.0)
+    forward = np.where(wrong, directions < 0, directions > 0)  # a wrong first exit is against the task
     speeds = []
     for i in np.flatnonzero(wrong):
         turn = int(np.argmax(-directions[i] * x[:, i]))  # the furthest point on the wrong side
         steps = x.shape[0] - 1 - turn
         if steps > 0:
             speeds.append(directions[i] * (x[-1, i] - x[turn, i]) / (steps * CONTROL_TIMESTEP))
-    forward_first = float(np.mean(side[left] > 0)) if left.any() else float("nan")
+    forward_first = float(np.mean(forward[left])) if left.any() else float("nan")
     return forward_first, float(np.mean(speeds)) if speeds else float("nan")
 
 
@@ -60,7 +58,9 @@ def cell_rows(out: Path) -> list[dict]:
         with warnings.catch_warnings():  # a metric that applies to no deployment is NaN
             warnings.simplefilter("ignore", RuntimeWarning)
             means = {k: float(np.nanmean(v)) for k, v in metrics.items()}
-        forward_first, way_back = exits_and_way_back(data["obs_x_displacement"][..., 0], data["tasks"][:, 0])
+        forward_first, way_back = exits_and_way_back(
+            data["obs_x_displacement"][..., 0], data["tasks"][:, 0], metrics["wrong_first_exit"]
+        )
         rows.append(
             {
                 "agent": record["agent"],

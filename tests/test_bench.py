@@ -60,7 +60,12 @@ def test_turnaround_summary_measures_first_exits_and_the_way_back():
     # Deployment 1, a forward task: straight out forwards. Deployment 2, a backward task: never leaves.
     right_first, stays = 0.3 * t, np.zeros_like(t)
     x = np.stack([wrong_first, right_first, stays], axis=1)
-    forward_first, way_back = summary.exits_and_way_back(x, np.array([1.0, 1.0, -1.0]))
+    directions = np.array([1.0, 1.0, -1.0])
+    rewards = np.zeros_like(x)
+    wrong_first = summary.suite.exploration_metrics("cheetah_dir_sparse")(
+        {"x_displacement": x[..., None]}, rewards, directions[:, None]
+    )["wrong_first_exit"]
+    forward_first, way_back = summary.exits_and_way_back(x, directions, wrong_first)
     assert forward_first == 0.5  # of the two deployments that left the zone
     assert way_back == pytest.approx(10 / (160 * summary.CONTROL_TIMESTEP))  # 10 m in 160 steps of 0.05 s
 
