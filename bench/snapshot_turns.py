@@ -14,16 +14,14 @@ from __future__ import annotations
 import argparse
 import os
 import runpy
-import warnings
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "disable")
 
-import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
-from hyperstate import agents, suite  # noqa: E402
-from hyperstate.evaluation.deploy import deploy, evaluation_tasks  # noqa: E402
+from hyperstate import agents  # noqa: E402
+from hyperstate.evaluation.deploy import deploy, evaluation_tasks, exploration_metric_means  # noqa: E402
 
 TASK = "cheetah_dir_sparse"
 
@@ -38,19 +36,19 @@ def main() -> None:
         runpy.run_path(path)
     torch.set_num_threads(1)
     tasks = evaluation_tasks(TASK, 20)
-    metrics_of = suite.exploration_metrics(TASK)
     snapshots = sorted((args.cell / "snapshots").glob("agent_*.pt"))
+
+    def f(value: float | None, spec: str) -> str:  # None: the metric applies to no deployment
+        return "—" if value is None else format(value, spec)
+
     for path in snapshots[args.every - 1 :: args.every]:
         deployment = deploy(agents.Agent.load(path), TASK, tasks)
-        metrics = metrics_of(deployment.observations, deployment.rewards, deployment.tasks)
-        with warnings.catch_warnings():  # a metric that applies to no deployment is NaN
-            warnings.simplefilter("ignore", RuntimeWarning)
-            means = {k: float(np.nanmean(v)) for k, v in metrics.items()}
+        means = exploration_metric_means(TASK, deployment.observations, deployment.rewards, deployment.tasks)
         frames = int(path.stem.split("_")[1])
         print(
             f"{frames / 1e6:5.1f}M  online return {deployment.rewards.sum(0).mean():6.0f}  "
-            f"turned {means['turned_around']:.2f}  R wrong-first {means['return_wrong_first']:6.0f}  "
-            f"correct direction {means['correct_direction']:.2f}"
+            f"turned {f(means['turned_around'], '.2f')}  R wrong-first {f(means['return_wrong_first'], '6.0f')}  "
+            f"correct direction {f(means['correct_direction'], '.2f')}"
         )
 
 
