@@ -92,13 +92,16 @@ def main() -> None:
     parser.add_argument("--seeds", type=int, nargs="+", default=[0, 1])
     parser.add_argument("--out", type=Path, default=None, help="default bench/results/learning_speed_<preset>.json")
     args = parser.parse_args()
-    curves = {
-        n: [
-            learning_curve(args.preset, args.task, n, args.frames, args.eval_every, args.eval_tasks, s)
-            for s in args.seeds
-        ]
-        for n in args.num_envs
-    }
+    curves: dict[int, list] = {}
+    for n in args.num_envs:
+        for s in args.seeds:
+            curve = learning_curve(args.preset, args.task, n, args.frames, args.eval_every, args.eval_tasks, s)
+            curves.setdefault(n, []).append(curve)
+            frames, seconds, online = curve[-1]
+            print(
+                f"num_envs {n} seed {s}: {frames:,} frames in {seconds:.0f} s, online return {online:.1f}",
+                flush=True,
+            )
     result = {
         "preset": args.preset,
         "task": args.task,
