@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Reproduce the paper's Figure 2 on cheetah_dir_sparse: 6 presets x 3 seeds (+ the task-aware reference,
 # which learns the dense cheetah_dir and is deployed on cheetah_dir_sparse), plus the extra rows of
-# bench/fig2_presets.py (oracle_rh_prior10). See docs/results.md and docs/turnaround.md.
+# bench/fig2_presets.py (oracle_rh_prior5). See docs/results.md and docs/turnaround.md.
 # The presets whose turn-around is in question run first, so a partial grid already answers it.
 #   bash bench/reproduce_fig2.sh [FRAMES] [OUT]
 # Resumable: rerun the same command after an interruption (it passes --resume when OUT exists).
@@ -13,7 +13,7 @@ RESUME=()
 [ -f "$OUT/grid.json" ] && RESUME=(--resume)
 MUJOCO_GL=disable .venv/bin/python evaluation/run.py \
   --import bench/fig2_presets.py \
-  --agents oracle_rh oracle_rh_prior10 hyperx varibad_rh oracle_rs oracle varibad \
+  --agents oracle_rh oracle_rh_prior5 hyperx varibad_rh oracle_rs oracle varibad \
   --tasks cheetah_dir_sparse --seeds 0 1 2 \
   --frames "$FRAMES" --eval-every $((FRAMES / 20)) --eval-tasks 20 \
   --config bench/fig2.toml --workers 2 --out "$OUT" "${RESUME[@]}"

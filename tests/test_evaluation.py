@@ -471,17 +471,17 @@ def test_figure_2_config_is_valid():
     )
     try:
         names, overrides = build_grid(args)
-        # The extra row is the committed preset with only its prior scale changed.
-        extra = agents.make("oracle_rh_prior10", **overrides["oracle_rh_prior10"]).config
+        # The extra row is the committed preset with only its prior scale changed (to the reference's 5).
+        extra = agents.make("oracle_rh_prior5", **overrides["oracle_rh_prior5"]).config
         committed = agents.make("oracle_rh", **overrides["oracle_rh"]).config
-        assert extra.bonuses[0].prior_scale == 10.0 and committed.bonuses[0].prior_scale == 5.0
+        assert extra.bonuses[0].prior_scale == 5.0 and committed.bonuses[0].prior_scale == 10.0
         assert dataclasses.replace(extra, bonuses=committed.bonuses) == committed
     finally:
-        agents.PRESETS.pop("oracle_rh_prior10", None)
+        agents.PRESETS.pop("oracle_rh_prior5", None)
         sys.modules.pop("fig2_presets", None)
-    assert set(presets) == {"oracle", "oracle_rs", "oracle_rh", "oracle_rh_prior10", "varibad", "varibad_rh", "hyperx"}
+    assert set(presets) == {"oracle", "oracle_rs", "oracle_rh", "oracle_rh_prior5", "varibad", "varibad_rh", "hyperx"}
     assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 4
-    assert overrides["oracle_rh_prior10"]["bonuses.0.updates_per_iteration"] == 4
+    assert overrides["oracle_rh_prior5"]["bonuses.0.updates_per_iteration"] == 4
     assert all(o["ppo.entropy_coef"] == 0.01 for o in overrides.values())
     assert all(o["physics_threads"] == 1 for o in overrides.values())
     # The reference-code rows (bench/reproduce_fig2_icml.sh) run the `_icml` presets unchanged.
@@ -498,23 +498,33 @@ def test_figure_2_config_is_valid():
 
 @pytest.mark.parametrize("path", sorted((ROOT / "bench" / "turnaround").glob("*.toml")), ids=lambda p: p.stem)
 def test_turnaround_configs_apply_on_top_of_the_figure_2_config(path):
-    """Each campaign config (docs/turnaround.md) names real fields and changes what it says it changes."""
+    """Each campaign config (docs/turnaround.md) names real fields and changes what it says it changes: its
+    [all] table on `oracle_rh`, a preset's own table on that preset (campaign presets included)."""
+    import tomllib
+
     from hyperstate.evaluation.run import build_grid, parse_args
 
-    base = ["--agents", "oracle_rh", "--tasks", "cheetah_dir_sparse", "--frames", "1000", "--out", "unused"]
-    base += ["--import", str(ROOT / "bench" / "fig2_presets.py")]  # fig2.toml has a table for its extra row
+    tables = tomllib.loads(path.read_text())
+    agent = next((name for name in tables if name != "all"), "oracle_rh")
+    base = ["--agents", agent, "--tasks", "cheetah_dir_sparse", "--frames", "1000", "--out", "unused"]
+    # fig2.toml has a table for its extra row; the campaign's own presets live next to the configs.
+    base += ["--import", str(ROOT / "bench" / "fig2_presets.py"), str(ROOT / "bench/turnaround/campaign_presets.py")]
     try:
         _, plain = build_grid(parse_args(base + ["--config", str(ROOT / "bench" / "fig2.toml")]))
         _, changed = build_grid(parse_args(base + ["--config", str(ROOT / "bench" / "fig2.toml"), str(path)]))
+        config = agents.make(agent, **changed[agent]).config
     finally:
-        agents.PRESETS.pop("oracle_rh_prior10", None)
-        sys.modules.pop("fig2_presets", None)
-    added = {k: v for k, v in changed["oracle_rh"].items() if plain["oracle_rh"].get(k) != v}
+        for name in ("oracle_rh_prior5", "oracle_rh_prior20"):
+            agents.PRESETS.pop(name, None)
+        for module in ("fig2_presets", "campaign_presets"):
+            sys.modules.pop(module, None)
+    added = {k: v for k, v in changed[agent].items() if plain[agent].get(k) != v}
     assert added, f"{path.name} changes nothing"
-    config = agents.make("oracle_rh", **changed["oracle_rh"]).config
     for key, value in added.items():
-        section, field = key.split(".")
-        assert getattr(getattr(config, section), field) == value
+        node = config
+        for part in key.split("."):
+            node = node[int(part)] if part.isdigit() else getattr(node, part)
+        assert node == value, key
 
 
 def test_grid_layout_owns_cell_names_and_paths(tmp_path):

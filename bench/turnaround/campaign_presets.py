@@ -1,0 +1,19 @@
+"""Presets of the turn-around campaign (docs/turnaround.md) that are not rows of the Figure-2 grid.
+
+`oracle_rh_prior20`: `oracle_rh` with its hyper-state RND prior scaled by 20 (H2's dose-response test: the
+reference code's 5 never made the turn pay at 2e7 frames, the paper's 10 did in 2 of 3 seeds; seed 2 walked
+back too slowly with either). Run 9 ran it from commit e5c5baa, where this file was
+bench/turnaround/presets.py and `oracle_rh` still had prior 5 (the preset is the same either way).
+Use with  --import bench/turnaround/campaign_presets.py --config bench/fig2.toml bench/turnaround/prior_20.toml
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+from hyperstate import agents
+
+_oracle_rh = agents.PRESETS["oracle_rh"]
+agents.PRESETS["oracle_rh_prior20"] = dataclasses.replace(
+    _oracle_rh, bonuses=(dataclasses.replace(_oracle_rh.bonuses[0], prior_scale=20.0),)
+)
