@@ -133,7 +133,15 @@ def import_modules(names: tuple[str, ...] | list[str]) -> None:
         if name.endswith(".py"):
             module_name = Path(name).stem
             if module_name in sys.modules:
-                continue
+                # The same file again is a no-op; another module of that name (a file with the same stem, or
+                # a library such as `json`) would otherwise be taken silently for this file.
+                loaded = getattr(sys.modules[module_name], "__file__", None)
+                if loaded is not None and Path(loaded).resolve() == Path(name).resolve():
+                    continue
+                raise ImportError(
+                    f"{name}: a module named {module_name!r} is already imported (from {loaded or 'a built-in'}); "
+                    "rename the file"
+                )
             spec = importlib.util.spec_from_file_location(module_name, name)
             if spec is None or spec.loader is None:
                 raise ImportError(f"cannot import {name}")

@@ -298,3 +298,28 @@ def test_the_lock_is_what_make_installed():
     installed.pop("hyperstate")
     assert installed == locked
     assert locked["torch"] == "2.13.0" and locked["mujoco"] == "3.17.0" and locked["dm-control"] == "1.0.50"
+
+
+def test_an_imported_file_is_never_mistaken_for_another_module(tmp_path, monkeypatch):
+    """`--import x/extras.py` runs that file once; a second file with the same stem, or a file named like a
+    library module, is an error instead of being skipped silently (its registrations would never happen)."""
+    from hyperstate.evaluation.cell import import_modules
+
+    for folder in ("a", "b"):
+        (tmp_path / folder).mkdir()
+        (tmp_path / folder / "trust_extras.py").write_text("import builtins\nbuiltins.TRUST_EXTRAS_RUNS += 1\n")
+    (tmp_path / "json.py").write_text("raise AssertionError('must not run')\n")
+    import builtins
+
+    monkeypatch.setattr(builtins, "TRUST_EXTRAS_RUNS", 0, raising=False)
+    try:
+        import_modules([str(tmp_path / "a" / "trust_extras.py")])
+        import_modules([str(tmp_path / "a" / "trust_extras.py"), str(tmp_path / "a" / ".." / "a" / "trust_extras.py")])
+        assert builtins.TRUST_EXTRAS_RUNS == 1
+        with pytest.raises(ImportError, match=r"named 'trust_extras' is already imported .*a/trust_extras.py"):
+            import_modules([str(tmp_path / "b" / "trust_extras.py")])
+        with pytest.raises(ImportError, match="'json' is already imported"):
+            import_modules([str(tmp_path / "json.py")])
+        assert builtins.TRUST_EXTRAS_RUNS == 1
+    finally:
+        sys.modules.pop("trust_extras", None)
