@@ -126,3 +126,31 @@ def test_snapshot_turns_deploys_each_kept_agent(tmp_path):
     lines = [line for line in proc.stdout.splitlines() if "online return" in line]
     assert [line.split()[0] for line in lines] == ["0.4M", "0.8M"]
     assert all("turned" in line and "correct direction" in line for line in lines)
+
+
+def test_gait_probe_tells_the_agent_the_truth_and_measures_each_direction():
+    from types import SimpleNamespace
+
+    probe = _load_bench("gait_probe")
+    tasks = np.array([[1.0], [-1.0], [-1.0]])  # forward, backward, backward
+    seen = []
+
+    class Recorder:
+        def act(self, obs, state=None, deterministic=True, reward=None):
+            seen.append(obs["belief"].copy())
+            return np.zeros((3, 6)), state
+
+    told = probe.Told(Recorder(), tasks)
+    told.act({"belief": np.full((3, 2), 0.5, np.float32), "x_displacement": np.zeros((3, 1))})
+    # [P(backward), P(forward)], one-hot on the true direction, in the observation's dtype.
+    np.testing.assert_array_equal(seen[0], [[0.0, 1.0], [1.0, 0.0], [1.0, 0.0]])
+    assert seen[0].dtype == np.float32
+    # 200 steps of 0.05 s: forward task to +40 m, backward tasks to -10 m and +2 m.
+    steps = np.arange(1, 201)[:, None]
+    x = steps / 200 * np.array([[40.0, -10.0, 2.0]])
+    rewards = np.tile([[1.0, 0.5, -0.5]], (200, 1))
+    result = probe.per_direction(
+        SimpleNamespace(observations={"x_displacement": x[..., None]}, tasks=tasks, rewards=rewards)
+    )
+    assert result["forward"] == pytest.approx({"online_return": 200.0, "final_x": 40.0, "speed": 4.0})
+    assert result["backward"] == pytest.approx({"online_return": 0.0, "final_x": -4.0, "speed": 0.4})
