@@ -5,6 +5,9 @@ reference code's 5 never made the turn pay at 2e7 frames, the paper's 10 did in 
 back too slowly with either). Run 9 ran it from commit e5c5baa, where this file was
 bench/turnaround/presets.py and `oracle_rh` still had prior 5 (the preset is the same either way).
 Use with  --import bench/turnaround/campaign_presets.py --config bench/fig2.toml bench/turnaround/prior_20.toml
+
+`oracle_rh_rs`: `oracle_rh` (prior 10) plus `hyperx`'s state bonus r_s on x (H8: more experience far along
+the second direction, where its gait is trained). Config: bench/turnaround/oracle_rh_rs.toml.
 """
 
 from __future__ import annotations
@@ -16,4 +19,7 @@ from hyperstate import agents
 _oracle_rh = agents.PRESETS["oracle_rh"]
 agents.PRESETS["oracle_rh_prior20"] = dataclasses.replace(
     _oracle_rh, bonuses=(dataclasses.replace(_oracle_rh.bonuses[0], prior_scale=20.0),)
+)
+agents.PRESETS["oracle_rh_rs"] = dataclasses.replace(
+    _oracle_rh, bonuses=(*_oracle_rh.bonuses, agents.PRESETS["hyperx"].bonuses[1])
 )
