@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import runpy
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "disable")
@@ -21,6 +20,7 @@ os.environ.setdefault("MUJOCO_GL", "disable")
 import torch  # noqa: E402
 
 from hyperstate import agents  # noqa: E402
+from hyperstate.evaluation.cell import import_modules  # noqa: E402
 from hyperstate.evaluation.deploy import deploy, evaluation_tasks, exploration_metric_means  # noqa: E402
 
 TASK = "cheetah_dir_sparse"
@@ -32,8 +32,7 @@ def main() -> None:
     parser.add_argument("--every", type=int, default=4)
     parser.add_argument("--import", dest="imports", nargs="*", default=[], help="preset files the cell used")
     args = parser.parse_args()
-    for path in args.imports:
-        runpy.run_path(path)
+    import_modules(args.imports)
     torch.set_num_threads(1)
     tasks = evaluation_tasks(TASK, 20)
     snapshots = sorted((args.cell / "snapshots").glob("agent_*.pt"))

@@ -509,13 +509,14 @@ def test_turnaround_configs_apply_on_top_of_the_figure_2_config(path):
     base = ["--agents", agent, "--tasks", "cheetah_dir_sparse", "--frames", "1000", "--out", "unused"]
     # fig2.toml has a table for its extra row; the campaign's own presets live next to the configs.
     base += ["--import", str(ROOT / "bench" / "fig2_presets.py"), str(ROOT / "bench/turnaround/campaign_presets.py")]
+    registered = set(agents.PRESETS)
     try:
         _, plain = build_grid(parse_args(base + ["--config", str(ROOT / "bench" / "fig2.toml")]))
         _, changed = build_grid(parse_args(base + ["--config", str(ROOT / "bench" / "fig2.toml"), str(path)]))
         config = agents.make(agent, **changed[agent]).config
     finally:
-        for name in ("oracle_rh_prior5", "oracle_rh_prior20"):
-            agents.PRESETS.pop(name, None)
+        for name in set(agents.PRESETS) - registered:  # whatever the imported files registered
+            agents.PRESETS.pop(name)
         for module in ("fig2_presets", "campaign_presets"):
             sys.modules.pop(module, None)
     added = {k: v for k, v in changed[agent].items() if plain[agent].get(k) != v}
