@@ -43,6 +43,11 @@ class PPOConfig:
     # it on the sampled action. This adds coef * (|a|^2 - |clip(a)|^2) of the sampled action a to the training
     # reward (0.05, the cheetah's control-cost weight, reproduces the reference); deployment is unaffected.
     sampled_action_cost: float = 0.0
+    # None: the weighted bonuses are added to the extrinsic reward and one critic learns the sum (the paper, the
+    # reference code). A discount: a second critic head learns the intrinsic return alone, discounted by it (RND's
+    # two value heads, Burda et al. 2019), the bonuses are normalised by the std of their returns under it, and
+    # the two streams' GAE advantages are summed.
+    intrinsic_gamma: float | None = None
 
     def __post_init__(self) -> None:
         _check_choice("ppo.value_loss", self.value_loss, ("mse", "clipped_huber"))
@@ -50,6 +55,13 @@ class PPOConfig:
         _check_choice("ppo.advantage_norm", self.advantage_norm, ("minibatch", "batch"))
         if self.sampled_action_cost < 0:
             raise ValueError(f"ppo.sampled_action_cost must be >= 0, got {self.sampled_action_cost}")
+        if self.intrinsic_gamma is not None and not 0.0 < self.intrinsic_gamma < 1.0:
+            raise ValueError(f"ppo.intrinsic_gamma must be in (0, 1) or null, got {self.intrinsic_gamma}")
+
+    @property
+    def value_heads(self) -> int:
+        """Critic outputs: 1 (one return) or 2 (extrinsic and intrinsic returns, `intrinsic_gamma`)."""
+        return 1 if self.intrinsic_gamma is None else 2
 
     max_grad_norm: float = 0.5
     hidden: tuple[int, ...] = (128, 128)
@@ -152,6 +164,10 @@ class AgentConfig:
     torch_threads: int = 1
     physics_threads: int = 0  # 0: one per CPU
     checkpoint_every: int = 10  # iterations (0: only at the end and when the caller asks, see Agent.train)
+
+    def __post_init__(self) -> None:
+        if self.ppo.intrinsic_gamma is not None and not self.bonuses:
+            raise ValueError("ppo.intrinsic_gamma (an intrinsic value head) needs at least one bonus")
 
 
 def to_dict(config: Any) -> Any:

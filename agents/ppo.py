@@ -23,7 +23,8 @@ from hyperstate.agents.rollout import Rollout
 
 
 class ActorCritic(nn.Module):
-    """Separate actor and critic MLPs over embedded state ⊕ embedded belief features."""
+    """Separate actor and critic MLPs over embedded state ⊕ embedded belief features. The critic has one
+    output per return it learns (`config.value_heads`: the combined return, or extrinsic and intrinsic)."""
 
     def __init__(self, state_dim: int, feature_dim: int, action_dim: int, config: PPOConfig):
         super().__init__()
@@ -39,7 +40,7 @@ class ActorCritic(nn.Module):
             )
 
         self.actor = trunk(action_dim, 0.01)
-        self.critic = trunk(1, 1.0)
+        self.critic = trunk(config.value_heads, 1.0)
         self.log_std = nn.Parameter(torch.full((action_dim,), config.init_log_std))
         # The per-step path (`step`) runs the same layers as plain functions.
         parts = ("state", "features", "body")
@@ -50,7 +51,8 @@ class ActorCritic(nn.Module):
         return net["body"](torch.cat([net["state"](state), net["features"](features)], dim=-1))
 
     def value(self, state: torch.Tensor, features: torch.Tensor) -> torch.Tensor:
-        return self._run(self.critic, state, features)[..., 0]
+        """(..., value heads)."""
+        return self._run(self.critic, state, features)
 
     def distribution(self, state: torch.Tensor, features: torch.Tensor) -> torch.distributions.Normal:
         mean, std = self.mean_std(state, features)
@@ -67,7 +69,7 @@ class ActorCritic(nn.Module):
             run_plan(body, torch.cat([run_plan(embed_state, state), run_plan(embed_features, features)], dim=-1))
             for embed_state, embed_features, body in self._plans
         )
-        return mean, self.log_std.exp().expand_as(mean), value[..., 0]
+        return mean, self.log_std.exp().expand_as(mean), value
 
 
 def gaussian_log_prob(noise: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
@@ -129,12 +131,15 @@ def _minibatches(rollout: Rollout, belief, config: PPOConfig, generator: torch.G
 
 
 def value_loss(value: torch.Tensor, returns: torch.Tensor, old_value: torch.Tensor, config: PPOConfig) -> torch.Tensor:
-    """0.5 (V − R)², or the reference code's clipped Huber loss (`config.value_loss`)."""
+    """0.5 (V − R)², or the reference code's clipped Huber loss (`config.value_loss`); (..., heads) inputs,
+    the heads' losses summed."""
+    heads = value.shape[-1]
     if config.value_loss == "mse":
-        return 0.5 * (value - returns).pow(2).mean()
+        return 0.5 * (value - returns).pow(2).mean() * heads
     clipped = old_value + (value - old_value).clamp(-config.clip, config.clip)
     huber = nn.functional.smooth_l1_loss
-    return 0.5 * torch.max(huber(value, returns, reduction="none"), huber(clipped, returns, reduction="none")).mean()
+    worst = torch.max(huber(value, returns, reduction="none"), huber(clipped, returns, reduction="none"))
+    return 0.5 * worst.mean() * heads
 
 
 def ppo_update(

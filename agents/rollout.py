@@ -15,7 +15,8 @@ import torch
 
 @dataclasses.dataclass
 class Rollout:
-    """One rollout. Shapes: T = rollout length, N = envs, S = state, F = belief features, A = actions."""
+    """One rollout. Shapes: T = rollout length, N = envs, S = state, F = belief features, A = actions,
+    H = the critic's value heads (1, or 2 with an intrinsic value head)."""
 
     state: torch.Tensor  # (T, N, S) raw s_t
     policy_state: torch.Tensor  # (T, N, S) s_t normalised as the policy saw it
@@ -24,20 +25,29 @@ class Rollout:
     next_features: torch.Tensor  # (T, N, F) b_{t+1}, after the transition
     actions: torch.Tensor  # (T, N, A) sampled actions
     logprobs: torch.Tensor  # (T, N) log-probability of the sampled action
-    values: torch.Tensor  # (T, N) V(s_t, b_t)
-    next_values: torch.Tensor  # (T, N) V(s_{t+1}, b_{t+1})
+    values: torch.Tensor  # (T, N, H) V(s_t, b_t)
+    next_values: torch.Tensor  # (T, N, H) V(s_{t+1}, b_{t+1})
     rewards: torch.Tensor  # (T, N) raw extrinsic reward
     lasts: torch.Tensor  # (T, N) 1.0 where the step ended a BAMDP episode
     bootstrap: torch.Tensor  # (T, N) discount of V(s_{t+1}): 0 at terminations, else 1
     starts: torch.Tensor  # (T, N) bool: s_t began a BAMDP episode
     advantages: torch.Tensor  # (T, N) filled by the learner (GAE)
-    returns: torch.Tensor  # (T, N) filled by the learner: advantages + values
+    returns: torch.Tensor  # (T, N, H) filled by the learner: each head's advantages + values
     raw_obs: dict[str, np.ndarray]  # (T, N, ...) each observation key, as the environment returned it
     tasks: np.ndarray | None  # (T, N, P) true task parameters, where the task hands them over
     belief_state0: object = None  # the belief state before the first step (recurrent beliefs re-run from it)
 
     @classmethod
-    def allocate(cls, t_len: int, n: int, state_dim: int, feature_dim: int, action_dim: int, obs_spec: dict) -> Rollout:
+    def allocate(
+        cls,
+        t_len: int,
+        n: int,
+        state_dim: int,
+        feature_dim: int,
+        action_dim: int,
+        obs_spec: dict,
+        value_heads: int = 1,
+    ) -> Rollout:
         """Zeroed buffers for `t_len` steps of `n` envs; `obs_spec`: {key: (shape, dtype)}."""
 
         def zeros(*shape: int, dtype: torch.dtype = torch.float32) -> torch.Tensor:
@@ -52,14 +62,14 @@ class Rollout:
             next_features=zeros(feature_dim),
             actions=zeros(action_dim),
             logprobs=zeros(),
-            values=zeros(),
-            next_values=zeros(),
+            values=zeros(value_heads),
+            next_values=zeros(value_heads),
             rewards=zeros(),
             lasts=zeros(),
             bootstrap=zeros(),
             starts=zeros(dtype=torch.bool),
             advantages=zeros(),
-            returns=zeros(),
+            returns=zeros(value_heads),
             raw_obs=raw_obs,
             tasks=raw_obs.get("task"),
         )

@@ -72,6 +72,11 @@ def bonus_anneal_factor(bonus: BonusConfig, anneal_all: bool, progress: float) -
     return 1.0 if until is None else max(0.0, 1.0 - progress / until)
 
 
+def intrinsic_discount(p: config_lib.PPOConfig) -> float:
+    """The discount of the bonuses' returns: the policy's, or the intrinsic value head's."""
+    return p.gamma if p.intrinsic_gamma is None else p.intrinsic_gamma
+
+
 class PhaseClock:
     """Wall time per phase of an iteration, for the log's `time/<phase>` breakdown (seconds): `mark(name)`
     charges the time since the previous mark to `name`. A few `perf_counter` calls per step; nothing
@@ -239,7 +244,7 @@ class Trainer:
             env=env,
             carry=carry,
             ext_scaler=ReturnScaler(p.num_envs, p.gamma),
-            bonus_scalers=[ReturnScaler(p.num_envs, p.gamma) for _ in policy.bonuses],
+            bonus_scalers=[ReturnScaler(p.num_envs, intrinsic_discount(p)) for _ in policy.bonuses],
             trajectories=TrajectoryBuffer(cfg.vae.buffer_trajectories),
         )
         self.rollout = Rollout.allocate(
@@ -249,6 +254,7 @@ class Trainer:
             policy.belief.feature_dim,
             policy.action_dim,
             policy.obs_spec,
+            value_heads=p.value_heads,
         )
         self.checkpoint = Path(checkpoint_dir) / "checkpoint.pt" if checkpoint_dir else None
         self.clock = PhaseClock()
@@ -326,7 +332,9 @@ class Trainer:
 
     def restore(self, path: Path) -> None:
         saved = serialization.load(path, kind="checkpoint")
-        if (saved["config"], saved["task"], saved["seed"], saved["frames"]) != self.state.identity():
+        # The config as this code reads it: a checkpoint from before a config field existed holds its default.
+        config = config_lib.to_dict(config_lib.from_dict(config_lib.AgentConfig, saved["config"]))
+        if (config, saved["task"], saved["seed"], saved["frames"]) != self.state.identity():
             raise ValueError(f"checkpoint {path} was written by a different run (config, task, seed or frames)")
         self.state.load_state_dict(saved)
 
@@ -393,10 +401,10 @@ class Trainer:
             )
             # V(s_{t+1}) for steps that did not end an episode is the next step's value; only episode ends
             # bootstrap with the discount the environment gave.
-            lasts = r.lasts.bool()
+            lasts = r.lasts.bool()[..., None]
             following = torch.cat([r.values[1:], final_value[None]])
             r.next_values.copy_(torch.where(lasts, r.next_values, following))
-            r.bootstrap.copy_(torch.where(lasts, r.bootstrap, torch.ones_like(r.bootstrap)))
+            r.bootstrap.copy_(torch.where(lasts[..., 0], r.bootstrap, torch.ones_like(r.bootstrap)))
         clock.mark("inference")
         state.carry = Carry(obs, bstate, is_start, episode_return)
         return completed
@@ -452,17 +460,29 @@ class Trainer:
             magnitude.update({name: float(np.abs(w).mean()) for name, w in weighted.items()})
             total = sum(magnitude.values()) or 1.0
             log.update({f"reward_share/{name}": m / total for name, m in magnitude.items()})
-        advantages, returns = compute_gae(
-            reward,
-            rollout.values.numpy(),
-            rollout.next_values.numpy(),
-            lasts.astype(np.float64),
-            rollout.bootstrap.numpy(),
-            p.gamma,
-            p.gae_lambda,
-        )
+        # One reward stream per value head: the combined reward, or (intrinsic_gamma) the extrinsic and the
+        # intrinsic parts, each with its own discount; PPO follows the sum of their advantages.
+        streams = [(reward, p.gamma)]
+        if p.value_heads == 2:
+            intrinsic = sum(
+                (f * c.weight * b for f, c, b in zip(anneals, cfg.bonuses, scaled_bonuses, strict=True)),
+                np.zeros_like(reward),
+            )
+            streams = [(reward - intrinsic, p.gamma), (intrinsic, p.intrinsic_gamma)]
+        advantages = np.zeros_like(reward)
+        for head, (stream, gamma) in enumerate(streams):
+            head_advantages, head_returns = compute_gae(
+                stream,
+                rollout.values[..., head].numpy(),
+                rollout.next_values[..., head].numpy(),
+                lasts.astype(np.float64),
+                rollout.bootstrap.numpy(),
+                gamma,
+                p.gae_lambda,
+            )
+            advantages = advantages + head_advantages
+            rollout.returns[..., head] = torch.as_tensor(head_returns, dtype=torch.float32)
         rollout.advantages.copy_(torch.as_tensor(advantages, dtype=torch.float32))
-        rollout.returns.copy_(torch.as_tensor(returns, dtype=torch.float32))
         self.clock.mark("returns")  # eq. (4) and GAE
         log.update(ppo_update(policy.model, policy.belief, state.optimizer, rollout, p, policy.generator))
         self.clock.mark("ppo")

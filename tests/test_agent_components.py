@@ -277,7 +277,7 @@ def test_actor_critic_step_equals_mean_std_and_value_exactly_through_training(em
         expected_mean, expected_std = model.mean_std(state, features)
         assert torch.equal(mean, expected_mean) and torch.equal(std, expected_std)
         assert torch.equal(value, model.value(state, features))
-        assert value.shape == (16,) and mean.shape == (16, 3)
+        assert value.shape == (16, 1) and mean.shape == (16, 3)  # one value head
 
     check()
     optimizer = torch.optim.Adam(model.parameters(), lr=1e-2)

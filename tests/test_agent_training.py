@@ -78,9 +78,18 @@ def test_same_seed_same_numbers_different_seed_different():
     assert runs[0][1] != runs[2][1]
 
 
-@pytest.mark.parametrize("preset", ["hyperx", "rl2", "hyperx_icml", "oracle_rh_icml"])
-def test_resume_from_checkpoint_equals_uninterrupted_run(preset, tmp_path):
-    config = {**TINY, "checkpoint_every": 1}
+@pytest.mark.parametrize(
+    ("preset", "overrides"),
+    [
+        ("hyperx", {}),
+        ("rl2", {}),
+        ("hyperx_icml", {}),
+        ("oracle_rh_icml", {}),
+        ("oracle_rh", {"ppo.intrinsic_gamma": 0.99}),  # two value heads
+    ],
+)
+def test_resume_from_checkpoint_equals_uninterrupted_run(preset, overrides, tmp_path):
+    config = {**TINY, "checkpoint_every": 1, **overrides}
     # A BAMDP episode (50 steps) spans two rollouts of 25 steps, so the checkpoint falls mid-episode.
     config["ppo.rollout_length"] = 25
     run = {"frames": 500, "seed": 2, "task_kwargs": TINY_TASK, "progress": False}
