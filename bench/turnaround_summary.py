@@ -1,6 +1,6 @@
 """Per-run turn-around table of a cheetah-direction grid, as markdown rows (docs/turnaround.md).
 
-    .venv/bin/python bench/turnaround_summary.py runs/fig2_20m [--json OUT.json]
+    .venv/bin/python bench/turnaround_summary.py runs/fig2_20m [MORE_OUTS ...] [--json OUT.json] [--plot OUT.png]
 
 For every finished cell: the final online return, returns on forward / backward tasks, the share of
 deployments whose first exit was on the wrong side, the share of those that ended beyond the zone on the
@@ -9,7 +9,9 @@ where recorded, the curve every 2M frames, and each deployment's final x; and tw
 direction asymmetry (docs/turnaround.md): the share of deployments whose first exit was forward, and the
 mean speed of the way back on wrong-first deployments (m/s towards the rewarded side, from the furthest
 point on the wrong side to the end of the episode). Computed from each cell's `deployment.npz` with the
-task's own metrics (`suite.exploration_metrics`), so older grids work too.
+task's own metrics (`suite.exploration_metrics`), so older grids work too. `--plot` draws every run's
+learning curve, one panel per agent and one line per seed (a mean over seeds would hide that a preset
+learns the turn in one seed and not in another).
 """
 
 from __future__ import annotations
@@ -71,6 +73,7 @@ def cell_rows(out: Path) -> list[dict]:
                 "forward_first_exit": forward_first,
                 "way_back_speed": way_back,
                 "curve": [p["online_return"] for p in record["curve"]],
+                "curve_frames": [p["frames"] for p in record["curve"]],
                 "final_x": data["obs_x_displacement"][-1, :, 0].tolist(),
                 "tasks": data["tasks"][:, 0].tolist(),
             }
@@ -99,18 +102,46 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def plot_curves(rows: list[dict], path: Path) -> None:
+    """Online return against frames for every run: a panel per agent, a line per seed, the final
+    deployment's return as a dot at the budget."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    agents = list(dict.fromkeys(r["agent"] for r in rows))
+    fig, axes = plt.subplots(1, len(agents), figsize=(4.2 * len(agents), 3.6), sharey=True, squeeze=False)
+    for ax, agent in zip(axes[0], agents, strict=True):
+        for r in sorted((r for r in rows if r["agent"] == agent), key=lambda r: r["seed"]):
+            frames = np.asarray(r["curve_frames"]) / 1e6
+            (line,) = ax.plot(frames, r["curve"], label=f"seed {r['seed']}: {r['online_return']:.0f}")
+            ax.plot(frames[-1:], [r["online_return"]], "o", color=line.get_color())
+        ax.axhline(0, color="0.6", linewidth=0.8)
+        ax.set_title(agent)
+        ax.set_xlabel("frames (millions)")
+        ax.legend(fontsize=8, title="final online return", title_fontsize=8)
+    axes[0][0].set_ylabel("online return at deployment")
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("out", type=Path)
+    parser.add_argument("outs", type=Path, nargs="+", help="results folders of evaluation/run.py")
     parser.add_argument("--json", type=Path, default=None)
+    parser.add_argument("--plot", type=Path, default=None, help="PNG of every run's learning curve")
     args = parser.parse_args()
-    rows = cell_rows(args.out)
+    rows = [row for out in args.outs for row in cell_rows(out)]
     print(markdown(rows))
     for r in rows:
         moves = " ".join(f"{t:+.0f}:{x:+.0f}" for t, x in zip(r["tasks"], r["final_x"], strict=True))
         print(f"{r['agent']} s{r['seed']} final x per task (direction:x): {moves}")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1))
+    if args.plot:
+        plot_curves(rows, args.plot)
 
 
 if __name__ == "__main__":

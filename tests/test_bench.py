@@ -70,6 +70,17 @@ def test_turnaround_summary_measures_first_exits_and_the_way_back():
     assert way_back == pytest.approx(10 / (160 * summary.CONTROL_TIMESTEP))  # 10 m in 160 steps of 0.05 s
 
 
+def test_turnaround_summary_plots_every_run(tmp_path):
+    summary = _load_bench("turnaround_summary")
+    rows = [
+        {"agent": agent, "seed": seed, "online_return": 100.0 * seed, "curve": [0.0, 50.0 * seed],
+         "curve_frames": [1_000_000, 2_000_000]}
+        for agent in ("oracle_rh", "hyperx") for seed in (0, 1)
+    ]  # fmt: skip
+    summary.plot_curves(rows, tmp_path / "curves.png")
+    assert (tmp_path / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
 def _load_bench(name: str):
     import importlib.util
 
