@@ -8,7 +8,8 @@ right side (`turned_around`), their mean return, correct direction, stuck, the s
 where recorded, the curve every 2M frames, and each deployment's final x; and two numbers for the
 direction asymmetry (docs/turnaround.md): the share of deployments whose first exit was forward, and the
 mean speed of the way back on wrong-first deployments (m/s towards the rewarded side, from the furthest
-point on the wrong side to the end of the episode). Computed from each cell's `deployment.npz` with the
+point on the wrong side to the end of the episode); and the share of deployments that end with the
+cheetah on its back (`flipped`). Computed from each cell's `deployment.npz` with the
 task's own metrics (`suite.exploration_metrics`), so older grids work too. `--plot` draws every run's
 learning curve, one panel per agent and one line per seed (a mean over seeds would hide that a preset
 learns the turn in one seed and not in another).
@@ -26,6 +27,8 @@ import numpy as np
 from hyperstate import suite
 from hyperstate.suite.cheetah_dir import CONTROL_TIMESTEP
 
+ROOT_PITCH = 1  # column of the root's pitch (rooty) in the cheetah's `position` observation (qpos without x)
+
 
 def exits_and_way_back(x: np.ndarray, directions: np.ndarray, wrong_first_exit: np.ndarray) -> tuple[float, float]:
     """(share of deployments whose first exit from the zone was forward, mean speed in m/s of the way back
@@ -42,6 +45,12 @@ def exits_and_way_back(x: np.ndarray, directions: np.ndarray, wrong_first_exit: 
             speeds.append(directions[i] * (x[-1, i] - x[turn, i]) / (steps * CONTROL_TIMESTEP))
     forward_first = float(np.mean(forward[left])) if left.any() else float("nan")
     return forward_first, float(np.mean(speeds)) if speeds else float("nan")
+
+
+def upside_down(pitch: np.ndarray) -> np.ndarray:
+    """Whether the torso is on its back, from the root's pitch angle(s) in radians (an unlimited hinge:
+    any multiple of 2π may have been added)."""
+    return np.cos(pitch) < 0
 
 
 def cell_rows(out: Path) -> list[dict]:
@@ -63,6 +72,7 @@ def cell_rows(out: Path) -> list[dict]:
         forward_first, way_back = exits_and_way_back(
             data["obs_x_displacement"][..., 0], data["tasks"][:, 0], metrics["wrong_first_exit"]
         )
+        flipped = upside_down(data["obs_position"][-1, :, ROOT_PITCH])
         rows.append(
             {
                 "agent": record["agent"],
@@ -72,6 +82,7 @@ def cell_rows(out: Path) -> list[dict]:
                 **means,
                 "forward_first_exit": forward_first,
                 "way_back_speed": way_back,
+                "flipped_at_end": float(flipped.mean()),
                 "curve": [p["online_return"] for p in record["curve"]],
                 "curve_frames": [p["frames"] for p in record["curve"]],
                 "final_x": data["obs_x_displacement"][-1, :, 0].tolist(),
@@ -87,8 +98,8 @@ def markdown(rows: list[dict]) -> str:
 
     lines = [
         "| run | online return | R forward | R backward | wrong first | turned | R wrong-first | correct dir. | stuck "
-        "| stochastic | first exit forward | way back m/s | curve every 2M |",
-        "|---|---|---|---|---|---|---|---|---|---|---|---|---|",
+        "| stochastic | first exit forward | way back m/s | flipped | curve every 2M |",
+        "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         curve = ", ".join(f(v) for v in r["curve"][1::2])
@@ -97,6 +108,7 @@ def markdown(rows: list[dict]) -> str:
             f"{f(r['return_backward'])} | {f(r['wrong_first_exit'], '.2f')} | {f(r['turned_around'], '.2f')} | "
             f"{f(r['return_wrong_first'])} | {f(r['correct_direction'], '.2f')} | {f(r['stuck'], '.2f')} | "
             f"{f(r['stochastic_return'])} | {f(r['forward_first_exit'], '.2f')} | {f(r['way_back_speed'], '.1f')} | "
+            f"{f(r['flipped_at_end'], '.2f')} | "
             f"{curve} |"
         )
     return "\n".join(lines)

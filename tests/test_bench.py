@@ -70,6 +70,19 @@ def test_turnaround_summary_measures_first_exits_and_the_way_back():
     assert way_back == pytest.approx(10 / (160 * summary.CONTROL_TIMESTEP))  # 10 m in 160 steps of 0.05 s
 
 
+def test_turnaround_summary_knows_a_cheetah_on_its_back():
+    summary = _load_bench("turnaround_summary")
+    pitch = np.array([0.0, 1.0, np.pi, -3.0, 2 * np.pi + 0.1, 2 * np.pi + np.pi])
+    assert summary.upside_down(pitch).tolist() == [False, False, True, True, False, True]
+    from hyperstate import suite
+
+    env = suite.load("cheetah_dir_sparse", seed=0)
+    step = env.reset()
+    # the position observation is qpos without x: (rootz, rooty, six joints)
+    assert step.observation["position"].shape == (8,)
+    assert step.observation["position"][summary.ROOT_PITCH] == env.physics.named.data.qpos["rooty"][0]
+
+
 def test_turnaround_summary_plots_every_run(tmp_path):
     summary = _load_bench("turnaround_summary")
     rows = [
