@@ -46,7 +46,7 @@ class PPOConfig:
     # None: the weighted bonuses are added to the extrinsic reward and one critic learns the sum (the paper, the
     # reference code). A discount: a second critic head learns the intrinsic return alone, discounted by it (RND's
     # two value heads, Burda et al. 2019), the bonuses are normalised by the std of their returns under it, and
-    # the two streams' GAE advantages are summed.
+    # the two streams' GAE advantages are summed. An agent without bonuses has nothing to split: one head.
     intrinsic_gamma: float | None = None
 
     def __post_init__(self) -> None:
@@ -57,11 +57,6 @@ class PPOConfig:
             raise ValueError(f"ppo.sampled_action_cost must be >= 0, got {self.sampled_action_cost}")
         if self.intrinsic_gamma is not None and not 0.0 < self.intrinsic_gamma < 1.0:
             raise ValueError(f"ppo.intrinsic_gamma must be in (0, 1) or null, got {self.intrinsic_gamma}")
-
-    @property
-    def value_heads(self) -> int:
-        """Critic outputs: 1 (one return) or 2 (extrinsic and intrinsic returns, `intrinsic_gamma`)."""
-        return 1 if self.intrinsic_gamma is None else 2
 
     max_grad_norm: float = 0.5
     hidden: tuple[int, ...] = (128, 128)
@@ -165,9 +160,11 @@ class AgentConfig:
     physics_threads: int = 0  # 0: one per CPU
     checkpoint_every: int = 10  # iterations (0: only at the end and when the caller asks, see Agent.train)
 
-    def __post_init__(self) -> None:
-        if self.ppo.intrinsic_gamma is not None and not self.bonuses:
-            raise ValueError("ppo.intrinsic_gamma (an intrinsic value head) needs at least one bonus")
+    @property
+    def value_heads(self) -> int:
+        """Critic outputs: 1 (one return), or 2 (extrinsic and intrinsic returns: `ppo.intrinsic_gamma` set
+        and at least one bonus)."""
+        return 2 if self.ppo.intrinsic_gamma is not None and self.bonuses else 1
 
 
 def to_dict(config: Any) -> Any:

@@ -79,7 +79,7 @@ class Policy:
                 f"ppo.minibatch_unit 'transitions' needs a belief whose features are fixed in the rollout; the "
                 f"{cfg.belief!r} belief is trained through time by the RL loss: use 'envs'"
             )
-        self.model = ActorCritic(self.state_dim, self.belief.feature_dim, self.action_dim, cfg.ppo)
+        self.model = ActorCritic(self.state_dim, self.belief.feature_dim, self.action_dim, cfg.ppo, cfg.value_heads)
         self.bonuses = []
         for i, b in enumerate(cfg.bonuses):
             keys = b.state_keys if b.state_keys is not None else self.state_keys

@@ -24,9 +24,9 @@ from hyperstate.agents.rollout import Rollout
 
 class ActorCritic(nn.Module):
     """Separate actor and critic MLPs over embedded state ⊕ embedded belief features. The critic has one
-    output per return it learns (`config.value_heads`: the combined return, or extrinsic and intrinsic)."""
+    output per return it learns (`value_heads`: the combined return, or extrinsic and intrinsic)."""
 
-    def __init__(self, state_dim: int, feature_dim: int, action_dim: int, config: PPOConfig):
+    def __init__(self, state_dim: int, feature_dim: int, action_dim: int, config: PPOConfig, value_heads: int = 1):
         super().__init__()
 
         def trunk(out_dim: int, gain: float) -> nn.ModuleDict:
@@ -40,7 +40,7 @@ class ActorCritic(nn.Module):
             )
 
         self.actor = trunk(action_dim, 0.01)
-        self.critic = trunk(config.value_heads, 1.0)
+        self.critic = trunk(value_heads, 1.0)
         self.log_std = nn.Parameter(torch.full((action_dim,), config.init_log_std))
         # The per-step path (`step`) runs the same layers as plain functions.
         parts = ("state", "features", "body")

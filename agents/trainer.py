@@ -254,7 +254,7 @@ class Trainer:
             policy.belief.feature_dim,
             policy.action_dim,
             policy.obs_spec,
-            value_heads=p.value_heads,
+            value_heads=cfg.value_heads,
         )
         self.checkpoint = Path(checkpoint_dir) / "checkpoint.pt" if checkpoint_dir else None
         self.clock = PhaseClock()
@@ -463,7 +463,7 @@ class Trainer:
         # One reward stream per value head: the combined reward, or (intrinsic_gamma) the extrinsic and the
         # intrinsic parts, each with its own discount; PPO follows the sum of their advantages.
         streams = [(reward, p.gamma)]
-        if p.value_heads == 2:
+        if cfg.value_heads == 2:
             intrinsic = sum(
                 (f * c.weight * b for f, c, b in zip(anneals, cfg.bonuses, scaled_bonuses, strict=True)),
                 np.zeros_like(reward),
