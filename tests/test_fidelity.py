@@ -98,8 +98,8 @@ def _rollout(t_len: int = 6, n: int = 4) -> SimpleNamespace:
         actions=torch.randn(t_len, n, 2, generator=g),
         logprobs=torch.randn(t_len, n, generator=g) - 2.0,
         advantages=3.0 + 2.0 * torch.randn(t_len, n, generator=g),
-        returns=torch.randn(t_len, n, generator=g),
-        values=torch.randn(t_len, n, generator=g),
+        returns=torch.randn(t_len, n, generator=g)[..., None],  # (T, N, value heads)
+        values=torch.randn(t_len, n, generator=g)[..., None],
     )
 
 
@@ -153,8 +153,13 @@ def test_clipped_huber_value_loss_by_hand():
 
     # Clipped predictions: 0.6 (moved 0.5 → 0.1), 0.0 (unchanged), 5.0.
     want = 0.5 * np.mean([max(huber(1.0, 0.0), huber(0.6, 0.0)), huber(0.0, 3.0), huber(5.0, 5.05)])
-    assert value_loss(value, returns, old, config).item() == pytest.approx(want)
-    assert value_loss(value, returns, old, PPOConfig()).item() == pytest.approx(0.5 * np.mean([1.0, 9.0, 0.0025]))
+    one_head = value[:, None], returns[:, None], old[:, None]  # (batch, value heads)
+    assert value_loss(*one_head, config).item() == pytest.approx(want)
+    assert value_loss(*one_head, PPOConfig()).item() == pytest.approx(0.5 * np.mean([1.0, 9.0, 0.0025]))
+    # Two heads: the sum of each head's loss.
+    two = [torch.stack([t, 2 * t], dim=-1) for t in (value, returns, old)]
+    want_second = 0.5 * np.mean([max(huber(2.0, 0.0), huber(1.1, 0.0)), huber(0.0, 6.0), huber(10.0, 10.1)])
+    assert value_loss(*two, config).item() == pytest.approx(want + want_second)
 
 
 def test_control_cost_on_the_sampled_action():
