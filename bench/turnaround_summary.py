@@ -114,6 +114,12 @@ def markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def rename_agents(rows: list[dict], pairs: list[str]) -> list[dict]:
+    """Rows with agents renamed by "OLD=NEW" pairs, all at once (so two names can swap)."""
+    names = dict(pair.split("=", 1) for pair in pairs)
+    return [{**row, "agent": names.get(row["agent"], row["agent"])} for row in rows]
+
+
 def plot_curves(rows: list[dict], path: Path) -> None:
     """Online return against frames for every run: a panel per agent, a line per seed, the final
     deployment's return as a dot at the budget."""
@@ -144,8 +150,16 @@ def main() -> None:
     parser.add_argument("outs", type=Path, nargs="+", help="results folders of evaluation/run.py")
     parser.add_argument("--json", type=Path, default=None)
     parser.add_argument("--plot", type=Path, default=None, help="PNG of every run's learning curve")
+    parser.add_argument(
+        "--rename",
+        nargs="+",
+        default=[],
+        metavar="OLD=NEW",
+        help="agent names as they should read (a grid older than a preset's renaming; applied at once, so "
+        "two names can swap)",
+    )
     args = parser.parse_args()
-    rows = [row for out in args.outs for row in cell_rows(out)]
+    rows = rename_agents([row for out in args.outs for row in cell_rows(out)], args.rename)
     print(markdown(rows))
     for r in rows:
         moves = " ".join(f"{t:+.0f}:{x:+.0f}" for t, x in zip(r["tasks"], r["final_x"], strict=True))

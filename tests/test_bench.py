@@ -91,6 +91,8 @@ def test_turnaround_summary_plots_every_run(tmp_path):
         for agent in ("oracle_rh", "hyperx") for seed in (0, 1)
     ]  # fmt: skip
     summary.plot_curves(rows, tmp_path / "curves.png")
+    swapped = summary.rename_agents(rows, ["oracle_rh=hyperx", "hyperx=oracle_rh"])
+    assert [r["agent"] for r in swapped] == ["hyperx", "hyperx", "oracle_rh", "oracle_rh"]
     assert (tmp_path / "curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
