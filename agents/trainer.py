@@ -401,10 +401,10 @@ class Trainer:
             )
             # V(s_{t+1}) for steps that did not end an episode is the next step's value; only episode ends
             # bootstrap with the discount the environment gave.
-            lasts = r.lasts.bool()[..., None]
+            ended = r.lasts.bool()
             following = torch.cat([r.values[1:], final_value[None]])
-            r.next_values.copy_(torch.where(lasts, r.next_values, following))
-            r.bootstrap.copy_(torch.where(lasts[..., 0], r.bootstrap, torch.ones_like(r.bootstrap)))
+            r.next_values.copy_(torch.where(ended[..., None], r.next_values, following))  # every value head
+            r.bootstrap.copy_(torch.where(ended, r.bootstrap, torch.ones_like(r.bootstrap)))
         clock.mark("inference")
         state.carry = Carry(obs, bstate, is_start, episode_return)
         return completed
@@ -447,27 +447,24 @@ class Trainer:
             bonus_scalers=state.bonus_scalers,
             reward_clip=p.reward_clip,
         )
-        weighted = {}
+        weighted = []  # (name, the bonus as eq. (4) added it to the reward)
         for bonus, config, factor, raw, scaled in zip(
             policy.bonuses, cfg.bonuses, anneals, raw_bonuses, scaled_bonuses, strict=True
         ):
             log[f"bonus/{bonus.name}/raw_mean"] = float(raw.mean())
             log[f"bonus/{bonus.name}/scaled_mean"] = float(scaled.mean())
-            weighted[bonus.name] = factor * config.weight * scaled
+            weighted.append((bonus.name, factor * config.weight * scaled))
+        intrinsic = sum((w for _, w in weighted), np.zeros_like(reward))
         if weighted:
             # Each stream's share of the reward PPO sees (mean magnitude after normalisation and weighting).
-            magnitude = {"extrinsic": float(np.abs(reward - sum(weighted.values())).mean())}
-            magnitude.update({name: float(np.abs(w).mean()) for name, w in weighted.items()})
+            magnitude = {"extrinsic": float(np.abs(reward - intrinsic).mean())}
+            magnitude.update({name: float(np.abs(w).mean()) for name, w in weighted})
             total = sum(magnitude.values()) or 1.0
             log.update({f"reward_share/{name}": m / total for name, m in magnitude.items()})
         # One reward stream per value head: the combined reward, or (intrinsic_gamma) the extrinsic and the
         # intrinsic parts, each with its own discount; PPO follows the sum of their advantages.
         streams = [(reward, p.gamma)]
         if cfg.value_heads == 2:
-            intrinsic = sum(
-                (f * c.weight * b for f, c, b in zip(anneals, cfg.bonuses, scaled_bonuses, strict=True)),
-                np.zeros_like(reward),
-            )
             streams = [(reward - intrinsic, p.gamma), (intrinsic, p.intrinsic_gamma)]
         advantages = np.zeros_like(reward)
         for head, (stream, gamma) in enumerate(streams):
