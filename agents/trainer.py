@@ -463,11 +463,11 @@ class Trainer:
             log.update({f"reward_share/{name}": m / total for name, m in magnitude.items()})
         # One reward stream per value head: the combined reward, or (intrinsic_gamma) the extrinsic and the
         # intrinsic parts, each with its own discount; PPO follows the sum of their advantages.
-        streams = [(reward, p.gamma)]
+        streams = [("combined", reward, p.gamma)]
         if cfg.value_heads == 2:
-            streams = [(reward - intrinsic, p.gamma), (intrinsic, p.intrinsic_gamma)]
+            streams = [("extrinsic", reward - intrinsic, p.gamma), ("intrinsic", intrinsic, p.intrinsic_gamma)]
         advantages = np.zeros_like(reward)
-        for head, (stream, gamma) in enumerate(streams):
+        for head, (stream_name, stream, gamma) in enumerate(streams):
             head_advantages, head_returns = compute_gae(
                 stream,
                 rollout.values[..., head].numpy(),
@@ -478,6 +478,9 @@ class Trainer:
                 p.gae_lambda,
             )
             advantages = advantages + head_advantages
+            # How much each stream moves the policy: PPO normalises the summed advantages, so their spreads
+            # (not the rewards' shares) say which stream steers.
+            log[f"advantage_std/{stream_name}"] = float(head_advantages.std())
             rollout.returns[..., head] = torch.as_tensor(head_returns, dtype=torch.float32)
         rollout.advantages.copy_(torch.as_tensor(advantages, dtype=torch.float32))
         self.clock.mark("returns")  # eq. (4) and GAE

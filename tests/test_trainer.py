@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from hyperstate import agents
@@ -103,10 +104,11 @@ def test_one_value_head_learns_the_combined_reward(monkeypatch):
     trainer = _trainer("hyperx")
     assert trainer.rollout.values.shape == (30, 3, 1)
     trainer.collect()
-    trainer.learn(0)
+    log = trainer.learn(0)
     ((reward, _),) = combined
     ((stream, gamma, adv, ret),) = gae
     assert gamma == 0.97 and np.array_equal(stream, reward)
+    assert log["advantage_std/combined"] == pytest.approx(adv.std(), rel=1e-12)
     np.testing.assert_array_equal(trainer.rollout.advantages.numpy(), adv.astype(np.float32))
     np.testing.assert_array_equal(trainer.rollout.returns[..., 0].numpy(), ret.astype(np.float32))
 
@@ -120,13 +122,17 @@ def test_intrinsic_value_head_splits_the_reward_into_two_discounted_streams(monk
     features = torch.zeros(4, policy.belief.feature_dim)
     assert policy.model.value(torch.zeros(4, policy.state_dim), features).shape == (4, 2)
     trainer.collect()
-    trainer.learn(0)
+    log = trainer.learn(0)
     ((reward, scaled),) = combined
     (ext, ext_gamma, ext_adv, ext_ret), (intrinsic, int_gamma, int_adv, int_ret) = gae
     assert (ext_gamma, int_gamma) == (0.97, 0.995)
     weights = [b.weight for b in policy.config.bonuses]
     np.testing.assert_allclose(intrinsic, weights[0] * scaled[0] + weights[1] * scaled[1], rtol=1e-12)
     np.testing.assert_allclose(ext + intrinsic, reward, rtol=1e-12, atol=1e-12)
+    # Each stream's advantage spread is logged under its name (what steers PPO after normalisation).
+    assert log["advantage_std/extrinsic"] == pytest.approx(ext_adv.std(), rel=1e-12)
+    assert log["advantage_std/intrinsic"] == pytest.approx(int_adv.std(), rel=1e-12)
+    assert "advantage_std/combined" not in log
     assert np.abs(intrinsic).mean() > 0.1 and np.abs(ext).mean() > 0  # both streams carry reward
     rollout = trainer.rollout
     np.testing.assert_allclose(rollout.advantages.numpy(), ext_adv + int_adv, rtol=1e-5, atol=1e-6)
