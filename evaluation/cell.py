@@ -208,7 +208,9 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
     writer = SummaryWriter(log_dir=str(Path(spec.out) / grid.TENSORBOARD / spec.cell_id))
     started = time.perf_counter() - (record["curve"][-1]["wall_seconds"] if record["curve"] else 0.0)
 
-    shares: dict[str, list[float]] = {}  # reward-stream shares of the iterations since the last point
+    # Training-log families averaged into each curve point over the iterations since the previous one: the
+    # reward streams' shares and the value heads' advantage spreads, each keyed by stream.
+    since_point: dict[str, dict[str, list[float]]] = {"reward_share": {}, "advantage_std": {}}
 
     def evaluate(frames: int) -> dict:
         metrics = deployment_metrics(deploy(agent, spec.task, tasks, spec.episodes_per_task), spec.task)
@@ -220,9 +222,10 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
             "episode_returns": metrics["episode_returns"],
             "wall_seconds": time.perf_counter() - started,
         }
-        if shares:
-            point["reward_share"] = {k.removeprefix("reward_share/"): float(np.mean(v)) for k, v in shares.items()}
-            shares.clear()
+        for family, streams in since_point.items():
+            if streams:
+                point[family] = {stream: float(np.mean(values)) for stream, values in streams.items()}
+                streams.clear()
         if coverage is not None and coverage.visited.any():
             point["coverage"] = coverage.fraction()
             writer.add_scalar("eval/hyperstate_coverage", point["coverage"], frames)
@@ -266,8 +269,9 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
         frames = int(log["frames"])
         report_progress(frames, float(log.get("fps", 0.0)), complete=False)
         for key, value in log.items():
-            if key.startswith("reward_share/"):
-                shares.setdefault(key, []).append(value)
+            family, _, stream = key.partition("/")
+            if family in since_point:
+                since_point[family].setdefault(stream, []).append(value)
             if isinstance(value, float) and key not in ("wall_seconds",):
                 writer.add_scalar(key if "/" in key else f"train/{key}", value, frames)
         if not due(frames):

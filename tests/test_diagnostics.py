@@ -25,14 +25,26 @@ def cell(tmp_path_factory):
     return out, spec, run_cell(spec)
 
 
-def test_cell_records_stochastic_returns_reward_shares_and_turn_metrics(cell):
-    _, _, record = cell
+def test_cell_records_stochastic_returns_reward_shares_advantage_spreads_and_turn_metrics(cell):
+    out, _, record = cell
     assert len(record["curve"]) == 3
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    (events,) = (out / "tb").glob("*/events.out.tfevents.*")
+    logged = EventAccumulator(str(events), size_guidance={"scalars": 0})
+    logged.Reload()
+    spreads = [(e.step, e.value) for e in logged.Scalars("advantage_std/combined")]
+    previous = 0
     for point in record["curve"]:
         assert isinstance(point["online_return_stochastic"], float)
         shares = point["reward_share"]
         assert set(shares) == {"extrinsic", "0_rnd_hyperstate"}
         assert sum(shares.values()) == pytest.approx(1.0) and all(0 <= v <= 1 for v in shares.values())
+        # One value head (no intrinsic_gamma): the combined stream's advantage spread, averaged since the last point.
+        assert set(point["advantage_std"]) == {"combined"} and point["advantage_std"]["combined"] > 0
+        since = [value for step, value in spreads if previous < step <= point["frames"]]
+        assert since and point["advantage_std"]["combined"] == pytest.approx(np.mean(since), rel=1e-6)
+        previous = point["frames"]
     final = record["final"]
     assert final["stochastic"]["online_return"] == pytest.approx(record["curve"][-1]["online_return_stochastic"])
     for name in ("wrong_first_exit", "turned_around", "return_forward", "return_backward", "return_wrong_first"):
