@@ -114,7 +114,9 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
             "episode_returns",
             "wall_seconds",
             "coverage",
+            "advantage_std",
         }
+        assert set(r["curve"][0]["advantage_std"]) == {"combined"}  # one value head: no bonus, no intrinsic head
         assert r["config"]["ppo"]["num_envs"] == 4 and r["config"]["belief"] in ("oracle", "varibad", "task_aware")
         final = r["final"]
         assert final["online_return"] == pytest.approx(np.mean(final["online_return_per_task"]))
