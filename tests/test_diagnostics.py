@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import torch
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from hyperstate import agents, suite
 from hyperstate.agents.bonuses import BonusInput
@@ -28,8 +29,6 @@ def cell(tmp_path_factory):
 def test_cell_records_stochastic_returns_reward_shares_advantage_spreads_and_turn_metrics(cell):
     out, _, record = cell
     assert len(record["curve"]) == 3
-    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
-
     (events,) = (out / "tb").glob("*/events.out.tfevents.*")
     logged = EventAccumulator(str(events), size_guidance={"scalars": 0})
     logged.Reload()
