@@ -2,6 +2,7 @@
 
     .venv/bin/python bench/gait_probe.py runs/fig2_20m/cells/oracle_rh__cheetah_dir_sparse__s2 [CELL ...]
     .venv/bin/python bench/gait_probe.py CELL/snapshots/agent_000999936.pt ...   # saved agents work too
+    .venv/bin/python bench/gait_probe.py CELL [CELL ...] --every 2 --json OUT.json --plot OUT.png
 
 Failing `oracle_rh` runs turn after a wrong first exit and walk back at ~1 m/s (docs/turnaround.md).
 Either the policy has no fast gait in the direction it learned second, or it has one and does not use
@@ -11,12 +12,18 @@ observation replaced by the one-hot of the true direction from the first step, s
 Per direction it prints the online return, the final x and the mean speed towards the rewarded side over
 the episode (m/s). A policy with the gait runs the told direction from the start; one without walks.
 Only for agents whose belief reads the task's `belief` observation (the oracle).
+
+`--every N` probes every N-th kept snapshot of each cell (`snapshots/agent_<frames>.pt`) and the final
+agent, so the told speeds can be followed through training; `--json` writes every row, `--plot` draws
+each cell's told speed in its first direction (the faster one at the end) and its second against frames.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import re
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "disable")
@@ -60,26 +67,105 @@ def per_direction(deployment) -> dict[str, dict[str, float]]:
     return out
 
 
+def probes(cell: Path, every: int) -> list[tuple[int | None, Path]]:
+    """(frames or None for the final agent, agent file) to probe for one cell folder or agent file."""
+    if cell.suffix == ".pt":
+        return [(None, cell)]
+    found = []
+    if every > 0:
+        for path in sorted((cell / "snapshots").glob("agent_*.pt"))[every - 1 :: every]:
+            found.append((int(re.fullmatch(r"agent_(\d+)", path.stem).group(1)), path))
+    record = cell / "record.json"
+    frames = json.loads(record.read_text()).get("frames") if record.exists() else None
+    # The harness keeps a snapshot at each evaluation point; when the last one is the final agent, probe it once.
+    return [*(f for f in found if f[0] != frames), (frames, cell / "agent.pt")]
+
+
+def run_name(cell: Path) -> str:
+    """'OUT: agent sN' for a cell folder runs/OUT/cells/agent__task__sN (or an agent file in one)."""
+    folder = cell if cell.suffix != ".pt" else cell.parent.parent if cell.parent.name == "snapshots" else cell.parent
+    parts = folder.name.split("__")
+    return f"{folder.parent.parent.name}: {parts[0]} {parts[-1]}"
+
+
+def plot(rows: list[dict], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs = list(dict.fromkeys(r["run"] for r in rows))
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for i, run in enumerate(runs):
+        told = [r for r in rows if r["run"] == run and r["deployment"] == "told the task" and r["frames"]]
+        if not told:
+            continue
+        last = told[-1]
+        first = "forward" if last["forward"]["speed"] >= last["backward"]["speed"] else "backward"
+        second = "backward" if first == "forward" else "forward"
+        frames = [r["frames"] / 1e6 for r in told]
+        colour = f"C{i % 10}"
+        ax.plot(frames, [r[first]["speed"] for r in told], color=colour, lw=1, alpha=0.5)
+        ax.plot(
+            frames,
+            [r[second]["speed"] for r in told],
+            color=colour,
+            lw=2,
+            ls="--",
+            marker="o",
+            ms=3,
+            label=f"{run} (second: {second})",
+        )
+    ax.set_xlabel("training frames (M)")
+    ax.set_ylabel("speed towards the told direction (m/s)")
+    ax.set_title("Told the task from the first step: first direction (thin) and second (dashed)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=120)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("cells", type=Path, nargs="+", help="cell folders (their agent.pt) or saved agent files")
+    parser.add_argument("--every", type=int, default=0, help="also every N-th kept snapshot of each cell (0: none)")
+    parser.add_argument("--json", type=Path, default=None, help="write every row here")
+    parser.add_argument("--plot", type=Path, default=None, help="draw told speeds against frames here (--every)")
+    parser.add_argument(
+        "--labels", nargs="+", default=None, help="one name per cell, in order (default: 'OUT: agent sN')"
+    )
     args = parser.parse_args()
     torch.set_num_threads(1)
     tasks = evaluation_tasks(TASK, 20)
-    print("| run | deployment | R forward | x forward | m/s forward | R backward | x backward | m/s backward |")
-    print("|---|---|---|---|---|---|---|---|")
-    for cell in args.cells:
-        agent = agents.Agent.load(cell if cell.suffix == ".pt" else cell / "agent.pt")
-        if "belief" not in agent.obs_spec or agent.config.belief != "oracle":
-            raise SystemExit(f"{cell}: not a belief-oracle agent (belief {agent.config.belief!r})")
-        name = cell.name if cell.suffix != ".pt" else f"{cell.parent.parent.name} {cell.stem}"
-        for label, deployed in (("as trained", agent), ("told the task", Told(agent, tasks))):
-            r = per_direction(deploy(deployed, TASK, tasks))
-            f, b = r["forward"], r["backward"]
-            print(
-                f"| `{name}` | {label} | {f['online_return']:.0f} | {f['final_x']:+.1f} | {f['speed']:.1f} "
-                f"| {b['online_return']:.0f} | {b['final_x']:+.1f} | {b['speed']:.1f} |"
-            )
+    if args.labels is not None and len(args.labels) != len(args.cells):
+        parser.error(f"--labels names {len(args.labels)} runs for {len(args.cells)} cells")
+    labels = args.labels or [run_name(cell) for cell in args.cells]
+    rows = []
+    print(
+        "| run | frames | deployment | R forward | x forward | m/s forward | R backward | x backward | m/s backward |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for cell, label in zip(args.cells, labels, strict=True):
+        for frames, path in probes(cell, args.every):
+            agent = agents.Agent.load(path)
+            if "belief" not in agent.obs_spec or agent.config.belief != "oracle":
+                raise SystemExit(f"{path}: not a belief-oracle agent (belief {agent.config.belief!r})")
+            name = label if cell.suffix != ".pt" else f"{label} {path.stem}"
+            for how, deployed in (("as trained", agent), ("told the task", Told(agent, tasks))):
+                r = per_direction(deploy(deployed, TASK, tasks))
+                rows.append({"run": name, "frames": frames, "deployment": how, **r})
+                f, b = r["forward"], r["backward"]
+                print(
+                    f"| `{name}` | {frames or '—'} | {how} | {f['online_return']:.0f} | {f['final_x']:+.1f} "
+                    f"| {f['speed']:.1f} | {b['online_return']:.0f} | {b['final_x']:+.1f} | {b['speed']:.1f} |",
+                    flush=True,
+                )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps(rows, indent=1) + "\n")
+    if args.plot:
+        plot(rows, args.plot)
 
 
 if __name__ == "__main__":

@@ -180,3 +180,26 @@ def test_gait_probe_tells_the_agent_the_truth_and_measures_each_direction():
     )
     assert result["forward"] == pytest.approx({"online_return": 200.0, "final_x": 40.0, "speed": 4.0})
     assert result["backward"] == pytest.approx({"online_return": 0.0, "final_x": -4.0, "speed": 0.4})
+
+
+def test_gait_probe_follows_every_nth_snapshot_then_the_final_agent(tmp_path):
+    probe = _load_bench("gait_probe")
+    cell = tmp_path / "fig2_20m" / "cells" / "oracle_rh__cheetah_dir_sparse__s0"
+    (cell / "snapshots").mkdir(parents=True)
+    for frames in (998400, 1996800, 2995200, 3993600):
+        (cell / "snapshots" / f"agent_{frames:09d}.pt").touch()
+    (cell / "record.json").write_text(json.dumps({"frames": 4000000}))
+    assert probe.probes(cell, 2) == [
+        (1996800, cell / "snapshots" / "agent_001996800.pt"),
+        (3993600, cell / "snapshots" / "agent_003993600.pt"),
+        (4000000, cell / "agent.pt"),
+    ]
+    assert probe.probes(cell, 0) == [(4000000, cell / "agent.pt")]
+    (cell / "snapshots" / "agent_004000000.pt").touch()  # a snapshot of the final agent is probed once
+    assert probe.probes(cell, 1)[-2:] == [
+        (3993600, cell / "snapshots" / "agent_003993600.pt"),
+        (4000000, cell / "agent.pt"),
+    ]
+    assert probe.probes(cell / "agent.pt", 3) == [(None, cell / "agent.pt")]
+    assert probe.run_name(cell) == "fig2_20m: oracle_rh s0"
+    assert probe.run_name(cell / "snapshots" / "agent_001996800.pt") == "fig2_20m: oracle_rh s0"
