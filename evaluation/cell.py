@@ -55,6 +55,9 @@ class CellSpec:
     progress: bool = False  # the agent's own progress bar (evaluation/run.py draws one view of all cells instead)
     position: int = 0
     imports: tuple[str, ...] = ()  # user modules that register tasks and agents, imported in the worker first
+    # (.py path as given, its source) for each .py import, read by the driver: a Ray cell imports these, so a
+    # node needs no copy of the user's files (evaluation/remote.py).
+    import_sources: tuple[tuple[str, str], ...] = ()
     physics_threads: int = 0  # the cores this cell may use for physics (0: all); parallel cells share them
     storage: str | None = None  # where a Ray cell keeps its files between attempts (evaluation/storage.py)
 
@@ -121,6 +124,37 @@ def versions() -> dict:
     except (OSError, subprocess.SubprocessError):
         out["git_commit"] = None
     return out
+
+
+def read_import_sources(names: tuple[str, ...] | list[str]) -> tuple[tuple[str, str], ...]:
+    """(path, source) of every .py file among `--import` names, for cells on other machines."""
+    return tuple((name, Path(name).read_text()) for name in names if name.endswith(".py"))
+
+
+def materialize_imports(imports: tuple[str, ...], sources: tuple[tuple[str, str], ...]) -> tuple[str, ...]:
+    """`imports` with each shipped .py file replaced by a copy of its source on this machine.
+
+    The copy keeps the file's name (its module name: what registers the user's tasks and agents) in a
+    folder named by the source's hash, so a worker that runs several cells imports the same file again
+    (a no-op) and a changed source is never taken for the old one.
+    """
+    import hashlib
+    import tempfile
+
+    shipped = dict(sources)
+    local = []
+    for name in imports:
+        if name not in shipped:
+            local.append(name)
+            continue
+        source = shipped[name]
+        digest = hashlib.sha256(source.encode()).hexdigest()[:16]
+        path = Path(tempfile.gettempdir()) / "hyperstate-imports" / digest / Path(name).name
+        if not path.exists() or path.read_text() != source:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            write_bytes_atomic(path, source.encode())
+        local.append(str(path))
+    return tuple(local)
 
 
 def import_modules(names: tuple[str, ...] | list[str]) -> None:

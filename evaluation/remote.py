@@ -8,7 +8,7 @@ Ray (`RETRIES` times) on another node, where it resumes from the storage's last 
 equals an uninterrupted run's. Cells report progress to a small actor the driver reads for its view.
 
 On a cluster: `ray start --head` on one machine, `ray start --address HEAD:6379` on the others (each with
-this package installed, and any `--import` file at the same path), then
+this package installed; `--import` .py files travel with the cells, read by the driver), then
 `evaluation/run.py ... --executor ray --ray-address HEAD:6379 --storage s3://bucket/prefix` (any fsspec
 URI or a path every node mounts; by default `--out`, right where all nodes share one filesystem).
 Without `--ray-address` (or `$RAY_ADDRESS`) Ray starts a local instance bound to loopback.
@@ -27,6 +27,7 @@ from pathlib import Path
 from hyperstate.evaluation import grid
 from hyperstate.evaluation.cell import (
     CellSpec,
+    materialize_imports,
     report_failure,
     run_cell,
     write_bytes_atomic,
@@ -49,7 +50,8 @@ def run_cell_remotely(spec: CellSpec, board=None) -> tuple[dict, dict[str, bytes
         # The driver starts a grid only on an empty storage unless --resume: a stored record is this
         # grid's, left by an earlier attempt of this cell (its node died), so resume from it.
         resume = spec.resume or any(path.endswith(grid.RECORD) for path in pulled)
-        local = dataclasses.replace(spec, out=str(workdir), resume=resume)
+        imports = materialize_imports(spec.imports, spec.import_sources)  # the driver's files, not this node's
+        local = dataclasses.replace(spec, out=str(workdir), resume=resume, imports=imports)
         progress_file = grid.cell_dir(workdir, spec.cell_id) / grid.PROGRESS
         reported = [0]
 

@@ -31,6 +31,7 @@ from hyperstate.evaluation.cell import (
     CellSpec,
     import_modules,
     load_records,
+    read_import_sources,
     report_failure,
     run_cell,
     write_json_atomic,
@@ -97,7 +98,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=[],
         metavar="MODULE",
         help="modules or .py files to import first, e.g. your own tasks registered with suite.register "
-        "(imported in every worker too)",
+        "(imported in every worker too; Ray cells import the driver's copy of each .py file)",
     )
     p.add_argument(
         "--no-reference",
@@ -389,6 +390,8 @@ def main(argv: list[str] | None = None) -> int:
                 # Parallel cells share the cores: each cell's physics gets its share.
                 physics_threads=cells_per_worker_threads if args.executor == "local" and workers > 1 else 0,
                 storage=str(args.storage or args.out),
+                # Ray cells may run where the user's files are not: they take the driver's copies along.
+                import_sources=read_import_sources(args.imports) if args.executor == "ray" else (),
             )
         )
     started = time.perf_counter()

@@ -262,7 +262,7 @@ def test_ray_on_two_nodes_without_a_shared_out_survives_a_dead_node(tmp_path, ti
     """A simulated two-node Ray cluster whose cells work in their own node's folders and keep checkpoints
     in a storage apart from the driver's --out: the node running the cells dies mid-grid, a new node
     joins, the cells resume there from the storage, and every number equals the local executor's. The
-    agent is a user-registered preset (--import): Ray workers import the user's file themselves."""
+    agent is a user-registered preset (--import): Ray cells import the driver's copy of the user's file."""
     from ray.cluster_utils import Cluster
 
     user = tmp_path / "user_presets.py"
@@ -321,6 +321,35 @@ def test_ray_on_two_nodes_without_a_shared_out_survives_a_dead_node(tmp_path, ti
         assert not (cell / "checkpoint.pt").exists()
         assert (storage / "cells" / cell.name / "checkpoint.pt").exists()
         assert any((out / "tb" / cell.name).glob("events.out.tfevents.*"))
+
+
+def test_ray_cells_import_the_drivers_copy_of_import_files(tmp_path):
+    """A Ray cell's node need not have the user's --import files: the driver ships their sources, and the
+    cell imports a copy under the same module name."""
+    from hyperstate.evaluation.cell import materialize_imports, read_import_sources
+
+    user = tmp_path / "shipped_user_presets.py"
+    user.write_text(
+        'from hyperstate import agents\nagents.register_preset("shipped_oracle", agents.get_preset("oracle"))\n'
+    )
+    sources = read_import_sources([str(user), "json"])
+    assert sources == ((str(user), user.read_text()),)  # modules by name are the node's own
+    user.unlink()  # the node running the cell has no copy
+    imports = materialize_imports((str(user), "json"), sources)
+    copy = Path(imports[0])
+    assert imports[1] == "json" and copy.name == user.name and copy.read_text() == sources[0][1]
+    check = (
+        "import sys; from hyperstate.evaluation.cell import import_modules; import_modules(sys.argv[1:]); "
+        "from hyperstate import agents; print(agents.get_preset('shipped_oracle').belief)"
+    )
+    proc = subprocess.run([sys.executable, "-c", check, *imports], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert proc.stdout.strip() == "oracle"
+    # The same source lands on the same file (a worker running several cells imports it once); another
+    # source never reuses it.
+    assert materialize_imports((str(user),), sources) == imports[:1]
+    edited = ((str(user), sources[0][1] + "# edited\n"),)
+    assert materialize_imports((str(user),), edited) != imports[:1]
 
 
 def test_cell_store_copies_the_checkpoint_last_and_only_what_changed(tmp_path):
