@@ -24,6 +24,10 @@ class PPOConfig:
     rollout_length: int = 200  # control steps per env per update; a multiple of the BAMDP length
     lr: float = 7e-4
     anneal_lr: bool = True
+    # With anneal_lr, the learning rate falls linearly to 0 over this many frames; None: over the run's budget.
+    # A run shorter than it ends with a positive rate and trains exactly as the first frames of a run of that
+    # budget (the reference's 5e7 frames, say) would.
+    lr_anneal_frames: int | None = None
     gamma: float = 0.97
     gae_lambda: float = 0.9
     clip: float = 0.1
@@ -55,6 +59,8 @@ class PPOConfig:
         _check_choice("ppo.advantage_norm", self.advantage_norm, ("minibatch", "batch"))
         if self.sampled_action_cost < 0:
             raise ValueError(f"ppo.sampled_action_cost must be >= 0, got {self.sampled_action_cost}")
+        if self.lr_anneal_frames is not None and self.lr_anneal_frames <= 0:
+            raise ValueError(f"ppo.lr_anneal_frames must be positive or null, got {self.lr_anneal_frames}")
         if self.intrinsic_gamma is not None and not 0.0 < self.intrinsic_gamma < 1.0:
             raise ValueError(f"ppo.intrinsic_gamma must be in (0, 1) or null, got {self.intrinsic_gamma}")
 

@@ -285,10 +285,13 @@ class Trainer:
         )
         started = time.perf_counter() - elapsed
         frames_per_iteration = p.num_envs * p.rollout_length
+        lr_iterations = self.iterations  # the learning rate reaches 0 after this many iterations
+        if p.lr_anneal_frames is not None:
+            lr_iterations = math.ceil(p.lr_anneal_frames / frames_per_iteration)
         for iteration in range(start_iteration, self.iterations):
             if p.anneal_lr:
                 for group in state.optimizer.param_groups:
-                    group["lr"] = p.lr * (1.0 - iteration / self.iterations)
+                    group["lr"] = p.lr * max(0.0, 1.0 - iteration / lr_iterations)
             t0 = time.perf_counter()
             returns = self.collect()
             collect_seconds = time.perf_counter() - t0

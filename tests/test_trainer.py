@@ -163,3 +163,28 @@ def test_a_checkpoint_from_before_a_config_field_resumes(tmp_path):
     fresh = _trainer("oracle_rh")
     fresh.restore(tmp_path / "checkpoint.pt")
     assert fresh.state.iteration == 1
+
+
+def test_a_learning_rate_horizon_beyond_the_budget_trains_as_the_longer_runs_first_frames():
+    """`ppo.lr_anneal_frames`: a 3-iteration run whose rate decays over 9 iterations' frames is, weight for
+    weight, the first 3 iterations of a 9-iteration run; the rates it used are 1, 8/9 and 7/9 of `lr`."""
+    kwargs = dict(task_kwargs=TASK_KWARGS, seed=2)
+    per_iteration = TINY["ppo.num_envs"] * TINY["ppo.rollout_length"]
+    short = Trainer(agents.make("hyperx", **TINY, **{"ppo.lr_anneal_frames": 9 * per_iteration}),
+                    "cheetah_dir_sparse", frames=3 * per_iteration, **kwargs)  # fmt: skip
+    rates = []
+    short.run(progress=False, on_iteration=lambda log: rates.append(short.state.optimizer.param_groups[0]["lr"]))
+    lr = short.policy.config.ppo.lr
+    assert rates == pytest.approx([lr, lr * 8 / 9, lr * 7 / 9], rel=1e-12)
+    long = Trainer(agents.make("hyperx", **TINY), "cheetah_dir_sparse", frames=9 * per_iteration, **kwargs)
+    long.run(progress=False, stop_after_iterations=3)
+    for (name, a), (_, b) in zip(
+        short.policy.model.state_dict().items(), long.policy.model.state_dict().items(), strict=True
+    ):
+        assert torch.equal(a, b), name
+    # A budget's own horizon (the default) decays to 0 at its end: the 3-iteration run would differ.
+    default = Trainer(agents.make("hyperx", **TINY), "cheetah_dir_sparse", frames=3 * per_iteration, **kwargs)
+    default.run(progress=False)
+    assert not torch.equal(default.policy.model.actor["body"][-1].weight, long.policy.model.actor["body"][-1].weight)
+    with pytest.raises(ValueError, match="lr_anneal_frames"):
+        agents.make("hyperx", **{"ppo.lr_anneal_frames": 0})
