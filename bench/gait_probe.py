@@ -23,7 +23,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "disable")
@@ -32,6 +31,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from hyperstate import agents  # noqa: E402
+from hyperstate.evaluation import grid  # noqa: E402
 from hyperstate.evaluation.deploy import deploy, evaluation_tasks  # noqa: E402
 from hyperstate.suite.cheetah_dir import CONTROL_TIMESTEP  # noqa: E402
 
@@ -71,11 +71,8 @@ def probes(cell: Path, every: int) -> list[tuple[int | None, Path]]:
     """(frames or None for the final agent, agent file) to probe for one cell folder or agent file."""
     if cell.suffix == ".pt":
         return [(None, cell)]
-    found = []
-    if every > 0:
-        for path in sorted((cell / "snapshots").glob("agent_*.pt"))[every - 1 :: every]:
-            found.append((int(re.fullmatch(r"agent_(\d+)", path.stem).group(1)), path))
-    record = cell / "record.json"
+    found = grid.snapshots_in(cell)[every - 1 :: every] if every > 0 else []
+    record = cell / grid.RECORD
     frames = json.loads(record.read_text()).get("frames") if record.exists() else None
     # The harness keeps a snapshot at each evaluation point; when the last one is the final agent, probe it once.
     return [*(f for f in found if f[0] != frames), (frames, cell / "agent.pt")]
@@ -83,7 +80,9 @@ def probes(cell: Path, every: int) -> list[tuple[int | None, Path]]:
 
 def run_name(cell: Path) -> str:
     """'OUT: agent sN' for a cell folder runs/OUT/cells/agent__task__sN (or an agent file in one)."""
-    folder = cell if cell.suffix != ".pt" else cell.parent.parent if cell.parent.name == "snapshots" else cell.parent
+    folder = cell
+    if cell.suffix == ".pt":
+        folder = cell.parent.parent if cell.parent.name == grid.SNAPSHOTS else cell.parent
     parts = folder.name.split("__")
     return f"{folder.parent.parent.name}: {parts[0]} {parts[-1]}"
 

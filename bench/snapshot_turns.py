@@ -20,6 +20,7 @@ os.environ.setdefault("MUJOCO_GL", "disable")
 import torch  # noqa: E402
 
 from hyperstate import agents  # noqa: E402
+from hyperstate.evaluation import grid  # noqa: E402
 from hyperstate.evaluation.cell import import_modules  # noqa: E402
 from hyperstate.evaluation.deploy import deploy, evaluation_tasks, exploration_metric_means  # noqa: E402
 
@@ -35,15 +36,14 @@ def main() -> None:
     import_modules(args.imports)
     torch.set_num_threads(1)
     tasks = evaluation_tasks(TASK, 20)
-    snapshots = sorted((args.cell / "snapshots").glob("agent_*.pt"))
+    snapshots = grid.snapshots_in(args.cell)
 
     def f(value: float | None, spec: str) -> str:  # None: the metric applies to no deployment
         return "—" if value is None else format(value, spec)
 
-    for path in snapshots[args.every - 1 :: args.every]:
+    for frames, path in snapshots[args.every - 1 :: args.every]:
         deployment = deploy(agents.Agent.load(path), TASK, tasks)
         means = exploration_metric_means(TASK, deployment.observations, deployment.rewards, deployment.tasks)
-        frames = int(path.stem.split("_")[1])
         print(
             f"{frames / 1e6:5.1f}M  online return {deployment.rewards.sum(0).mean():6.0f}  "
             f"turned {f(means['turned_around'], '.2f')}  R wrong-first {f(means['return_wrong_first'], '6.0f')}  "

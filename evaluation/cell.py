@@ -150,7 +150,7 @@ def materialize_imports(imports: tuple[str, ...], sources: tuple[tuple[str, str]
         source = shipped[name]
         digest = hashlib.sha256(source.encode()).hexdigest()[:16]
         path = Path(tempfile.gettempdir()) / "hyperstate-imports" / digest / Path(name).name
-        if not path.exists() or path.read_text() != source:
+        if not path.exists():  # the folder is named by the source's hash: an existing copy is this source
             path.parent.mkdir(parents=True, exist_ok=True)
             write_bytes_atomic(path, source.encode())
         local.append(str(path))

@@ -67,5 +67,10 @@ def snapshot_path(out: Path, cell: str, frames: int) -> Path:
 
 def snapshots(out: Path, cell: str) -> list[tuple[int, Path]]:
     """(frames, path) of the agent kept at each evaluation point, in order."""
-    paths = sorted((cell_dir(out, cell) / SNAPSHOTS).glob("agent_*.pt"))
+    return snapshots_in(cell_dir(out, cell))
+
+
+def snapshots_in(directory: Path) -> list[tuple[int, Path]]:
+    """`snapshots` of a cell folder given by its path (wherever it lies)."""
+    paths = sorted((Path(directory) / SNAPSHOTS).glob("agent_*.pt"))
     return [(int(path.stem.split("_")[1]), path) for path in paths]
