@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 
-from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig
+from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig, VAEConfig
 from hyperstate.agents.naming import unknown_name
 
 STATE_BONUS = BonusConfig(input="state")  # state_keys="task": the task's position keys
@@ -41,10 +41,12 @@ PRESETS: dict[str, AgentConfig] = {
     "varibad_rh": AgentConfig(belief="varibad", bonuses=(HYPERSTATE_BONUS,)),
     "hyperx": AgentConfig(belief="varibad", bonuses=(HYPERSTATE_BONUS, STATE_BONUS)),
     "task_supervised": AgentConfig(belief="task_supervised"),
-    # HyperX as in the reference code: hyper-state RND x0.1 + VAE-error bonus x1.0, no state bonus.
+    # HyperX as in the reference code: hyper-state RND x0.1 + VAE-error bonus x1.0, no state bonus, and the
+    # reference's VAE buffer of 10,000 trajectories (the other presets keep 1,000).
     "hyperx_icml": AgentConfig(
         belief="varibad",
         ppo=ICML_PPO,
+        vae=VAEConfig(buffer_trajectories=10_000),
         bonuses=(
             dataclasses.replace(_ICML_RND, weight=0.1),
             BonusConfig(kind="vae_error", input="belief", weight=1.0),

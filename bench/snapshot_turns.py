@@ -7,11 +7,14 @@ Every `--every`-th agent in the cell's `snapshots/` (the harness keeps one per e
 loaded and deployed on the 20 held-out tasks with deterministic actions, as at the evaluation points;
 prints the online return and the task's turn-around metrics (`turned_around`, the mean return of the
 deployments whose first exit was wrong, `correct_direction`). Task: `cheetah_dir_sparse`.
+`--json OUT.json` also writes, per snapshot, its frames, online return and every metric the task declares
+(`suite.exploration_metrics`: `return_forward`, `return_backward`, `stuck`, ...), for docs/results/.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 from pathlib import Path
 
@@ -32,6 +35,7 @@ def main() -> None:
     parser.add_argument("cell", type=Path)
     parser.add_argument("--every", type=int, default=4)
     parser.add_argument("--import", dest="imports", nargs="*", default=[], help="preset files the cell used")
+    parser.add_argument("--json", type=Path, help="also write every snapshot's metrics to this file")
     args = parser.parse_args()
     import_modules(args.imports)
     torch.set_num_threads(1)
@@ -41,14 +45,20 @@ def main() -> None:
     def f(value: float | None, spec: str) -> str:  # None: the metric applies to no deployment
         return "—" if value is None else format(value, spec)
 
+    records = []
     for frames, path in snapshots[args.every - 1 :: args.every]:
         deployment = deploy(agents.Agent.load(path), TASK, tasks)
         means = exploration_metric_means(TASK, deployment.observations, deployment.rewards, deployment.tasks)
+        online_return = float(deployment.rewards.sum(0).mean())
+        records.append({"frames": frames, "online_return": online_return, **means})
         print(
-            f"{frames / 1e6:5.1f}M  online return {deployment.rewards.sum(0).mean():6.0f}  "
+            f"{frames / 1e6:5.1f}M  online return {online_return:6.0f}  "
             f"turned {f(means['turned_around'], '.2f')}  R wrong-first {f(means['return_wrong_first'], '6.0f')}  "
             f"correct direction {f(means['correct_direction'], '.2f')}"
         )
+    if args.json:
+        args.json.parent.mkdir(parents=True, exist_ok=True)
+        args.json.write_text(json.dumps({"cell": str(args.cell), "task": TASK, "snapshots": records}, indent=1))
 
 
 if __name__ == "__main__":

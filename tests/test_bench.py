@@ -146,12 +146,27 @@ def test_snapshot_turns_deploys_each_kept_agent(tmp_path):
         agent.save(tmp_path / "snapshots" / f"agent_{frames:09d}.pt")
     env = {**os.environ, "MUJOCO_GL": "disable"}
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "snapshot_turns.py"), str(tmp_path), "--every", "1"],
+        [sys.executable, str(ROOT / "bench" / "snapshot_turns.py"), str(tmp_path), "--every", "1",
+         "--json", str(tmp_path / "turns.json")],
         check=True, capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
     )  # fmt: skip
     lines = [line for line in proc.stdout.splitlines() if "online return" in line]
     assert [line.split()[0] for line in lines] == ["0.4M", "0.8M"]
     assert all("turned" in line and "correct direction" in line for line in lines)
+    # The JSON holds each snapshot's own deployment: the same numbers as a deployment made here.
+    from hyperstate.evaluation.deploy import deploy, evaluation_tasks, exploration_metric_means
+
+    records = json.loads((tmp_path / "turns.json").read_text())["snapshots"]
+    assert [r["frames"] for r in records] == [400_000, 800_000]
+    for record, line in zip(records, lines, strict=True):
+        deployment = deploy(agents.Agent.load(tmp_path / "snapshots" / f"agent_{record['frames']:09d}.pt"),
+                            "cheetah_dir_sparse", evaluation_tasks("cheetah_dir_sparse", 20))  # fmt: skip
+        assert record["online_return"] == pytest.approx(deployment.rewards.sum(0).mean(), rel=1e-9, abs=1e-9)
+        assert int(line.split()[3]) == round(record["online_return"])
+        means = exploration_metric_means("cheetah_dir_sparse", deployment.observations, deployment.rewards,
+                                         deployment.tasks)  # fmt: skip
+        assert set(means) <= set(record) and {"return_forward", "return_backward", "turned_around"} <= set(record)
+        assert record["correct_direction"] == pytest.approx(means["correct_direction"])
 
 
 def test_gait_probe_tells_the_agent_the_truth_and_measures_each_direction():

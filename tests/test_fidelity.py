@@ -189,6 +189,8 @@ def test_icml_presets_are_the_reference_configurations():
         1,
     )
     assert hyperx.anneal_bonus and hyperx.belief == "varibad"
+    assert hyperx.vae.buffer_trajectories == 10_000  # the reference's; the seed presets keep 1,000
+    assert hyperx.ppo.entropy_coef == 1e-4 and hyperx.ppo.sampled_action_cost == 0.05
     oracle = agents.get_preset("oracle_rh_icml")
     (rnd,) = oracle.bonuses
     assert (rnd.weight, rnd.prior_scale, rnd.clip, rnd.buffer_size, rnd.input_norm) == (
