@@ -161,10 +161,18 @@ class AgentConfig:
     recurrent: RecurrentConfig = RecurrentConfig()
     bonuses: tuple[BonusConfig, ...] = ()
     anneal_bonus: bool = False  # multiply every bonus by 1 - frames / total_frames
+    # The frames over which bonus annealing (`anneal_bonus`, `bonuses.i.anneal_until`) counts its progress;
+    # None: the run's budget. With `ppo.lr_anneal_frames` set alike, a shorter run trains exactly as the first
+    # frames of a run of this budget, annealed presets (the `_icml` ones) included.
+    bonus_anneal_frames: int | None = None
     state_keys: tuple[str, ...] | None = None  # None: every non-privileged observation key
     torch_threads: int = 1
     physics_threads: int = 0  # 0: one per CPU
     checkpoint_every: int = 10  # iterations (0: only at the end and when the caller asks, see Agent.train)
+
+    def __post_init__(self) -> None:
+        if self.bonus_anneal_frames is not None and self.bonus_anneal_frames <= 0:
+            raise ValueError(f"bonus_anneal_frames must be positive or null, got {self.bonus_anneal_frames}")
 
     @property
     def value_heads(self) -> int:

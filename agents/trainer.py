@@ -225,6 +225,9 @@ class Trainer:
         policy._build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(task))
         self.policy = policy
         self.iterations = math.ceil(frames / (p.num_envs * p.rollout_length))
+        # Bonus annealing counts its progress over the budget, or over `bonus_anneal_frames` when set.
+        anneal_frames = frames if cfg.bonus_anneal_frames is None else cfg.bonus_anneal_frames
+        self.anneal_iterations = math.ceil(anneal_frames / (p.num_envs * p.rollout_length))
         optimizer = torch.optim.Adam(
             [*policy.model.parameters(), *policy.belief.policy_parameters()], lr=p.lr, eps=1e-5
         )
@@ -438,7 +441,8 @@ class Trainer:
                 raw_bonuses.append(bonus.reward(flat).numpy().astype(np.float64).reshape(t_len, n))
                 log.update(bonus.update(flat))
         self.clock.mark("bonus")  # the bonuses' rewards and their networks' updates
-        anneals = [bonus_anneal_factor(b, cfg.anneal_bonus, iteration / self.iterations) for b in cfg.bonuses]
+        progress = iteration / self.anneal_iterations
+        anneals = [bonus_anneal_factor(b, cfg.anneal_bonus, progress) for b in cfg.bonuses]
         reward, scaled_bonuses = combine_rewards(
             extrinsic,
             raw_bonuses,

@@ -8,6 +8,7 @@ import torch
 
 from hyperstate import agents
 from hyperstate.agents import serialization
+from hyperstate.agents import trainer as trainer_module
 from hyperstate.agents.rollout import Rollout
 from hyperstate.agents.trainer import Trainer
 
@@ -188,3 +189,38 @@ def test_a_learning_rate_horizon_beyond_the_budget_trains_as_the_longer_runs_fir
     assert not torch.equal(default.policy.model.actor["body"][-1].weight, long.policy.model.actor["body"][-1].weight)
     with pytest.raises(ValueError, match="lr_anneal_frames"):
         agents.make("hyperx", **{"ppo.lr_anneal_frames": 0})
+
+
+def test_a_bonus_annealing_horizon_beyond_the_budget_trains_as_the_longer_runs_first_frames(monkeypatch):
+    """`bonus_anneal_frames` (with `ppo.lr_anneal_frames`): an annealed preset's 3-iteration run on a
+    9-iteration schedule is, weight for weight, the first 3 iterations of a 9-iteration run, and its bonus
+    weights were 1, 8/9 and 7/9 of λ; on its own budget's schedule (the default) it would differ."""
+    kwargs = dict(task_kwargs=TASK_KWARGS, seed=1)
+    per_iteration = TINY["ppo.num_envs"] * TINY["ppo.rollout_length"]
+    small = {**TINY, "bonuses.0.buffer_size": 1000}  # the preset's 1e7-input buffer is not what is tested
+    horizon = {"ppo.lr_anneal_frames": 9 * per_iteration, "bonus_anneal_frames": 9 * per_iteration}
+    short = Trainer(agents.make("oracle_rh_icml", **small, **horizon), "cheetah_dir_sparse", frames=3 * per_iteration,
+                    **kwargs)  # fmt: skip
+    factors = []
+    original = trainer_module.bonus_anneal_factor
+
+    def spy(bonus, anneal_all, progress):
+        factors.append(original(bonus, anneal_all, progress))
+        return factors[-1]
+
+    monkeypatch.setattr(trainer_module, "bonus_anneal_factor", spy)
+    short.run(progress=False)
+    monkeypatch.undo()
+    assert factors == pytest.approx([1.0, 8 / 9, 7 / 9], rel=1e-12)
+    long = Trainer(agents.make("oracle_rh_icml", **small), "cheetah_dir_sparse", frames=9 * per_iteration, **kwargs)
+    long.run(progress=False, stop_after_iterations=3)
+    for (name, a), (_, b) in zip(
+        short.policy.model.state_dict().items(), long.policy.model.state_dict().items(), strict=True
+    ):
+        assert torch.equal(a, b), name
+    lr_only = Trainer(agents.make("oracle_rh_icml", **small, **{"ppo.lr_anneal_frames": 9 * per_iteration}),
+                      "cheetah_dir_sparse", frames=3 * per_iteration, **kwargs)  # fmt: skip
+    lr_only.run(progress=False)
+    assert not torch.equal(lr_only.policy.model.actor["body"][-1].weight, long.policy.model.actor["body"][-1].weight)
+    with pytest.raises(ValueError, match="bonus_anneal_frames"):
+        agents.make("oracle_rh_icml", **{"bonus_anneal_frames": -1})
