@@ -297,10 +297,18 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
         }
         write_json_atomic(directory / grid.PROGRESS, state)
 
+    replaying = [spec.resume]  # until the first iteration after a resume has been seen
+
     def on_iteration(log: dict) -> bool:
         if sync is not None:
             sync()
         frames = int(log["frames"])
+        if replaying[0]:
+            # The first iteration after the checkpoint: points at or past it were written after the checkpoint
+            # (a crash between the two) and are evaluated again in place, so that each point still averages
+            # its own iterations (`since_point`), as in an uninterrupted run.
+            record["curve"] = [p for p in record["curve"] if p["frames"] < frames]
+            replaying[0] = False
         report_progress(frames, float(log.get("fps", 0.0)), complete=False)
         for key, value in log.items():
             family, _, stream = key.partition("/")
