@@ -3,7 +3,8 @@
 Everything a cell writes lives in `OUT/cells/<agent>__<task>__s<seed>/` (and its tensorboard scalars in
 `OUT/tb/<cell>/`): `record.json` (rewritten atomically after every evaluation point), the agent's
 training checkpoint, the agent at every evaluation point (`snapshots/`), the final agent, and the final
-deployment's trajectories (`deployment.npz`). A cell never writes the grid-level files: the driver
+deployment's trajectories (`deployment.npz`); while it trains, also `point_log.jsonl` (the logged values
+the next curve point averages, so that a resumed cell averages them as an uninterrupted one does). A cell never writes the grid-level files: the driver
 (evaluation/run.py) alone writes `results.json`, `summary.csv` and the figures, so parallel cells never
 touch a shared file. A cell whose record says `complete` is never re-run (on --resume it is only brought up
 to the current metrics, evaluation/upgrade.py); an incomplete one resumes from its checkpoint.
@@ -243,8 +244,11 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
     started = time.perf_counter() - (record["curve"][-1]["wall_seconds"] if record["curve"] else 0.0)
 
     # Training-log families averaged into each curve point over the iterations since the previous one: the
-    # reward streams' shares and the value heads' advantage spreads, each keyed by stream.
+    # reward streams' shares and the value heads' advantage spreads, each keyed by stream. Each iteration's
+    # values also go to a log on disk (grid.POINT_LOG), from which a resumed cell restores those of the
+    # iterations between the last point and its checkpoint (a periodic checkpoint falls between points).
     since_point: dict[str, dict[str, list[float]]] = {"reward_share": {}, "advantage_std": {}}
+    point_log = directory / grid.POINT_LOG
 
     def evaluate(frames: int) -> dict:
         metrics = deployment_metrics(deploy(agent, spec.task, tasks, spec.episodes_per_task), spec.task)
@@ -298,6 +302,7 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
         write_json_atomic(directory / grid.PROGRESS, state)
 
     replaying = [spec.resume]  # until the first iteration after a resume has been seen
+    point_written = [False]  # the previous iteration wrote a curve point
 
     def on_iteration(log: dict) -> bool:
         if sync is not None:
@@ -306,18 +311,33 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
         if replaying[0]:
             # The first iteration after the checkpoint: points at or past it were written after the checkpoint
             # (a crash between the two) and are evaluated again in place, so that each point still averages
-            # its own iterations (`since_point`), as in an uninterrupted run.
+            # its own iterations (`since_point`), as in an uninterrupted run: those after the last point
+            # and up to the checkpoint come back from the log.
             record["curve"] = [p for p in record["curve"] if p["frames"] < frames]
+            last_point = record["curve"][-1]["frames"] if record["curve"] else 0
+            restored = [e for e in read_point_log(point_log) if last_point < e["frames"] < frames]
+            for entry in restored:
+                add_to_point(since_point, entry["values"])
+            point_log.write_text("".join(json.dumps(e) + "\n" for e in restored))
             replaying[0] = False
+        elif point_written[0]:
+            # The previous iteration's point and its checkpoint are on disk: its iterations are not needed again.
+            point_log.write_text("")
+        point_written[0] = False
         report_progress(frames, float(log.get("fps", 0.0)), complete=False)
+        values: dict[str, dict[str, float]] = {}
         for key, value in log.items():
             family, _, stream = key.partition("/")
             if family in since_point:
-                since_point[family].setdefault(stream, []).append(value)
+                values.setdefault(family, {})[stream] = value
             if isinstance(value, float) and key not in ("wall_seconds",):
                 writer.add_scalar(key if "/" in key else f"train/{key}", value, frames)
+        add_to_point(since_point, values)
+        with point_log.open("a") as f:
+            f.write(json.dumps({"frames": frames, "values": values}) + "\n")
         if not due(frames):
             return False
+        point_written[0] = True
         evaluate(frames)
         # The agent at every evaluation point, for diagnostics through training (bonus heat maps).
         snapshot = grid.snapshot_path(Path(spec.out), spec.cell_id, frames)
@@ -361,11 +381,31 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
         **{f"obs_{k}": v for k, v in final.observations.items()},
     )
     agent.save(directory / grid.AGENT)
+    point_log.unlink(missing_ok=True)
     record["complete"] = True
     write_json_atomic(record_path, record)
     report_progress(record["frames"], 0.0, complete=True)
     writer.close()
     return record
+
+
+def add_to_point(since_point: dict[str, dict[str, list[float]]], values: dict[str, dict[str, float]]) -> None:
+    """Adds one iteration's logged values ({family: {stream: value}}) to those the next point averages."""
+    for family, streams in values.items():
+        for stream, value in streams.items():
+            since_point[family].setdefault(stream, []).append(value)
+
+
+def read_point_log(path: Path) -> list[dict]:
+    """The iterations in a cell's point log; a line cut short by a crash ends it."""
+    entries = []
+    if path.exists():
+        for line in path.read_text().splitlines():
+            try:
+                entries.append(json.loads(line))
+            except json.JSONDecodeError:
+                break
+    return entries
 
 
 def load_records(out: Path) -> list[dict]:

@@ -31,6 +31,8 @@ AGENT = "agent.pt"
 DEPLOYMENT = "deployment.npz"
 COVERAGE = "coverage.npy"
 PROGRESS = "progress.json"
+# The training-log values averaged into the next curve point, one JSON line per iteration since the last point.
+POINT_LOG = "point_log.jsonl"
 SNAPSHOTS = "snapshots"
 
 

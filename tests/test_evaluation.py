@@ -266,6 +266,59 @@ def test_sigkill_then_resume_equals_uninterrupted_run(tmp_path, tiny_config):
     assert strip_times(again) == strip_times(whole)
 
 
+class Crash(Exception):
+    """A simulated crash of a cell's process."""
+
+
+def test_resume_from_a_checkpoint_between_evaluation_points_keeps_each_points_averages(tmp_path):
+    """A crash after a periodic checkpoint that falls between two evaluation points: the resumed cell's next
+    point must still average the reward shares and advantage spreads of all its own iterations, those
+    before the checkpoint included, as the uninterrupted cell's does."""
+    from hyperstate.evaluation.cell import CellSpec, run_cell
+
+    # 200 frames per iteration, a point every 3 iterations, a checkpoint after every iteration.
+    overrides = {
+        "ppo.num_envs": 4,
+        "ppo.rollout_length": 50,
+        "vae.batch_trajectories": 2,
+        "vae.subsample_elbos": 10,
+        "vae.subsample_decodes": 10,
+        "checkpoint_every": 1,
+    }
+
+    def spec(out: Path, resume: bool) -> CellSpec:
+        return CellSpec(
+            agent="hyperx",
+            task="cheetah_dir_sparse",
+            seed=1,
+            frames=1800,
+            eval_every=600,
+            eval_tasks=2,
+            episodes_per_task=None,
+            overrides=overrides,
+            out=str(out),
+            resume=resume,
+        )
+
+    whole = run_cell(spec(tmp_path / "whole", resume=False))
+    calls = []
+
+    def crash_at_iteration_5() -> None:  # called before iteration 5's bookkeeping: iteration 4 is checkpointed
+        calls.append(1)
+        if len(calls) == 5:
+            raise Crash
+
+    with pytest.raises(Crash):
+        run_cell(spec(tmp_path / "crashed", resume=False), sync=crash_at_iteration_5)
+    cell = tmp_path / "crashed" / "cells" / "hyperx__cheetah_dir_sparse__s1"
+    assert serialization.load(cell / "checkpoint.pt", kind="checkpoint")["iteration"] == 4
+    assert [p["frames"] for p in json.loads((cell / "record.json").read_text())["curve"]] == [600]
+    resumed = run_cell(spec(tmp_path / "crashed", resume=True))
+    assert [p["frames"] for p in resumed["curve"]] == [600, 1200, 1800]
+    assert set(whole["curve"][1]["reward_share"]) == {"extrinsic", "0_rnd_hyperstate", "1_rnd_state"}
+    assert strip_times([resumed]) == strip_times([whole])
+
+
 def test_ray_on_two_nodes_without_a_shared_out_survives_a_dead_node(tmp_path, tiny_config):
     """A simulated two-node Ray cluster whose cells work in their own node's folders and keep checkpoints
     in a storage apart from the driver's --out: the node running the cells dies mid-grid, a new node
