@@ -4,10 +4,11 @@ Everything a cell writes lives in `OUT/cells/<agent>__<task>__s<seed>/` (and its
 `OUT/tb/<cell>/`): `record.json` (rewritten atomically after every evaluation point), the agent's
 training checkpoint, the agent at every evaluation point (`snapshots/`), the final agent, and the final
 deployment's trajectories (`deployment.npz`); while it trains, also `point_log.jsonl` (the logged values
-the next curve point averages, so that a resumed cell averages them as an uninterrupted one does). A cell never writes the grid-level files: the driver
-(evaluation/run.py) alone writes `results.json`, `summary.csv` and the figures, so parallel cells never
-touch a shared file. A cell whose record says `complete` is never re-run (on --resume it is only brought up
-to the current metrics, evaluation/upgrade.py); an incomplete one resumes from its checkpoint.
+the next curve point averages, so that a resumed cell averages them as an uninterrupted one does). A cell
+never writes the grid-level files: the driver (evaluation/run.py) alone writes `results.json`,
+`summary.csv` and the figures, so parallel cells never touch a shared file. A cell whose record says
+`complete` is never re-run (on --resume it is only brought up to the current metrics,
+evaluation/upgrade.py); an incomplete one resumes from its checkpoint.
 """
 
 from __future__ import annotations
