@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import tomllib
 
 from hyperstate import agents, suite
 from hyperstate.agents import serialization
@@ -276,15 +277,8 @@ def test_resume_from_a_checkpoint_between_evaluation_points_keeps_each_points_av
     before the checkpoint included, as the uninterrupted cell's does."""
     from hyperstate.evaluation.cell import CellSpec, run_cell
 
-    # 200 frames per iteration, a point every 3 iterations, a checkpoint after every iteration.
-    overrides = {
-        "ppo.num_envs": 4,
-        "ppo.rollout_length": 50,
-        "vae.batch_trajectories": 2,
-        "vae.subsample_elbos": 10,
-        "vae.subsample_decodes": 10,
-        "checkpoint_every": 1,
-    }
+    # The tiny grid's settings (200 frames per iteration), a point every 3 iterations, a checkpoint after each.
+    overrides = {**tomllib.loads(TINY_CONFIG)["all"], "checkpoint_every": 1}
 
     def spec(out: Path, resume: bool) -> CellSpec:
         return CellSpec(
