@@ -166,6 +166,10 @@ class AgentConfig:
     # frames of a run of this budget, annealed presets (the `_icml` ones) included.
     bonus_anneal_frames: int | None = None
     state_keys: tuple[str, ...] | None = None  # None: every non-privileged observation key
+    # Seed of the networks' initial weights (belief, actor-critic, bonus networks); None: the run's seed. The
+    # run's seed still draws the tasks, the action noise and the minibatches, so a seed's outcome can be split
+    # into its initialisation and its experience (docs/turnaround.md, "init or stream").
+    init_seed: int | None = None
     torch_threads: int = 1
     physics_threads: int = 0  # 0: one per CPU
     checkpoint_every: int = 10  # iterations (0: only at the end and when the caller asks, see Agent.train)

@@ -48,7 +48,7 @@ class Policy:
     def _build(self, obs_spec: dict, action_spec, seed: int, position_keys: tuple[str, ...] | None = None) -> None:
         cfg = self.config
         self.position_keys = position_keys
-        torch.manual_seed(seed)
+        torch.manual_seed(seed if cfg.init_seed is None else cfg.init_seed)  # every network's initial weights
         self.generator = torch.Generator().manual_seed(seed)
         public = [k for k in obs_spec if k not in PRIVILEGED_KEYS]
         self.state_keys = list(cfg.state_keys) if cfg.state_keys is not None else public

@@ -78,6 +78,31 @@ def test_same_seed_same_numbers_different_seed_different():
     assert runs[0][1] != runs[2][1]
 
 
+def test_init_seed_fixes_the_initial_weights_and_nothing_else():
+    task = "cheetah_dir_sparse"
+    env = suite.load(task, seed=0, privileged=True, **TINY_TASK)
+
+    def built(seed, **overrides):
+        agent = agents.make("hyperx", **TINY, **overrides)
+        agent._build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(task))
+        return agent
+
+    reference, borrowed, own = built(0), built(2, init_seed=0), built(2)
+    assert len(_params(reference)) > 10  # actor-critic, VAE and both RND predictors
+    for a, b in zip(_params(reference), _params(borrowed), strict=True):
+        torch.testing.assert_close(a, b, rtol=0, atol=0)
+    assert any(not torch.equal(a, b) for a, b in zip(_params(reference), _params(own), strict=True))
+    # The run's seed still draws the action noise and the minibatches.
+    assert borrowed.generator.initial_seed() == 2
+    # init_seed equal to the run's seed is the default run, number for number.
+    logs = [
+        agents.make("oracle_rh", **TINY, **extra).train(task, frames=400, seed=2, task_kwargs=TINY_TASK, progress=False)
+        for extra in ({}, {"init_seed": 2}, {"init_seed": 0})
+    ]
+    losses = [[entry["ppo/policy_loss"] for entry in log] for log in logs]
+    assert losses[0] == losses[1] != losses[2]
+
+
 @pytest.mark.parametrize(
     ("preset", "overrides"),
     [
