@@ -3,6 +3,7 @@
     .venv/bin/python bench/gait_probe.py runs/fig2_20m/cells/oracle_rh__cheetah_dir_sparse__s2 [CELL ...]
     .venv/bin/python bench/gait_probe.py CELL/snapshots/agent_000999936.pt ...   # saved agents work too
     .venv/bin/python bench/gait_probe.py CELL [CELL ...] --every 2 --json OUT.json --plot OUT.png
+    .venv/bin/python bench/gait_probe.py CELL --import my_components.py   # as the cell's run had it
 
 Failing `oracle_rh` runs turn after a wrong first exit and walk back at ~1 m/s (docs/turnaround.md).
 Either the policy has no fast gait in the direction it learned second, or it has one and does not use
@@ -32,6 +33,7 @@ import torch  # noqa: E402
 
 from hyperstate import agents  # noqa: E402
 from hyperstate.evaluation import grid  # noqa: E402
+from hyperstate.evaluation.cell import import_modules  # noqa: E402
 from hyperstate.evaluation.deploy import deploy, evaluation_tasks  # noqa: E402
 from hyperstate.suite.cheetah_dir import CONTROL_TIMESTEP  # noqa: E402
 
@@ -134,7 +136,11 @@ def main() -> None:
     parser.add_argument(
         "--labels", nargs="+", default=None, help="one name per cell, in order (default: 'OUT: agent sN')"
     )
+    parser.add_argument(
+        "--import", dest="imports", nargs="*", default=[], help="files registering the cells' own components"
+    )
     args = parser.parse_args()
+    import_modules(args.imports)
     torch.set_num_threads(1)
     tasks = evaluation_tasks(TASK, 20)
     if args.labels is not None and len(args.labels) != len(args.cells):
