@@ -170,6 +170,9 @@ class AgentConfig:
     # run's seed still draws the tasks, the action noise and the minibatches, so a seed's outcome can be split
     # into its initialisation and its experience (docs/turnaround.md, "init or stream").
     init_seed: int | None = None
+    # The bonuses' networks (RND priors and predictors) exactly as a run with init_seed = bonus_init_seed would
+    # start them, the belief's and actor-critic's from init_seed; None: all from init_seed.
+    bonus_init_seed: int | None = None
     torch_threads: int = 1
     physics_threads: int = 0  # 0: one per CPU
     checkpoint_every: int = 10  # iterations (0: only at the end and when the caller asks, see Agent.train)

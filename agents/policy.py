@@ -64,22 +64,18 @@ class Policy:
         self.action_dim = int(np.prod(action_spec.shape))
         self.obs_spec = {k: (tuple(v.shape), str(v.dtype)) for k, v in obs_spec.items()}
         self.action_bounds = (np.asarray(action_spec.minimum), np.asarray(action_spec.maximum))
-        self.belief = make_belief(
-            cfg.belief,
-            state_dim=self.state_dim,
-            action_dim=self.action_dim,
-            obs_spec=obs_spec,
-            vae=cfg.vae,
-            recurrent=cfg.recurrent,
-            generator=self.generator,
-            params=cfg.belief_params,
-        )
+        self.belief = self._make_belief(obs_spec, self.generator)
         if cfg.ppo.minibatch_unit == "transitions" and self.belief.policy_parameters():
             raise ValueError(
                 f"ppo.minibatch_unit 'transitions' needs a belief whose features are fixed in the rollout; the "
                 f"{cfg.belief!r} belief is trained through time by the RL loss: use 'envs'"
             )
-        self.model = ActorCritic(self.state_dim, self.belief.feature_dim, self.action_dim, cfg.ppo, cfg.value_heads)
+        self.model = self._actor_critic()
+        if cfg.bonus_init_seed is not None:
+            # Replay the draws a run with that init seed makes before its bonuses, so they start as its do.
+            torch.manual_seed(cfg.bonus_init_seed)
+            self._make_belief(obs_spec, torch.Generator())
+            self._actor_critic()
         self.bonuses = []
         for i, b in enumerate(cfg.bonuses):
             keys = b.state_keys if b.state_keys is not None else self.state_keys
@@ -99,6 +95,23 @@ class Policy:
             )
         self.obs_stats = RunningMeanStd((self.state_dim,))
         self._built = True
+
+    def _make_belief(self, obs_spec: dict, generator: torch.Generator):
+        cfg = self.config
+        return make_belief(
+            cfg.belief,
+            state_dim=self.state_dim,
+            action_dim=self.action_dim,
+            obs_spec=obs_spec,
+            vae=cfg.vae,
+            recurrent=cfg.recurrent,
+            generator=generator,
+            params=cfg.belief_params,
+        )
+
+    def _actor_critic(self) -> ActorCritic:
+        cfg = self.config
+        return ActorCritic(self.state_dim, self.belief.feature_dim, self.action_dim, cfg.ppo, cfg.value_heads)
 
     def _state_vector(self, obs: dict[str, np.ndarray]) -> np.ndarray:
         return np.concatenate(

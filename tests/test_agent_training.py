@@ -78,7 +78,7 @@ def test_same_seed_same_numbers_different_seed_different():
     assert runs[0][1] != runs[2][1]
 
 
-def test_init_seed_fixes_the_initial_weights_and_nothing_else():
+def test_init_seed_and_bonus_init_seed_fix_the_initial_weights_and_nothing_else():
     task = "cheetah_dir_sparse"
     env = suite.load(task, seed=0, privileged=True, **TINY_TASK)
 
@@ -94,6 +94,18 @@ def test_init_seed_fixes_the_initial_weights_and_nothing_else():
     assert any(not torch.equal(a, b) for a, b in zip(_params(reference), _params(own), strict=True))
     # The run's seed still draws the action noise and the minibatches.
     assert borrowed.generator.initial_seed() == 2
+    # bonus_init_seed: the bonuses' networks as a run with that init seed starts them, the rest as init_seed's.
+    mixed = built(2, init_seed=0, bonus_init_seed=2)
+
+    def networks(agent, bonuses):
+        parts = [m for b in agent.bonuses for m in (b.priors, b.predictors)] if bonuses else [agent.model]
+        return [p.detach() for m in parts + ([] if bonuses else [agent.belief.modules]) for p in m.parameters()]
+
+    for source, bonuses in ((reference, False), (own, True)):
+        for a, b in zip(networks(mixed, bonuses), networks(source, bonuses), strict=True):
+            torch.testing.assert_close(a, b, rtol=0, atol=0)
+    assert any(not torch.equal(a, b) for a, b in zip(networks(mixed, True), networks(reference, True), strict=True))
+    assert torch.equal(mixed.generator.get_state(), own.generator.get_state())
     # init_seed equal to the run's seed is the default run, number for number.
     logs = [
         agents.make("oracle_rh", **TINY, **extra).train(task, frames=400, seed=2, task_kwargs=TINY_TASK, progress=False)
