@@ -61,12 +61,18 @@ class PPOConfig:
             raise ValueError(f"ppo.sampled_action_cost must be >= 0, got {self.sampled_action_cost}")
         if self.lr_anneal_frames is not None and self.lr_anneal_frames <= 0:
             raise ValueError(f"ppo.lr_anneal_frames must be positive or null, got {self.lr_anneal_frames}")
+        if self.feature_embed_gain is not None and self.feature_embed_gain <= 0:
+            raise ValueError(f"ppo.feature_embed_gain must be positive or null, got {self.feature_embed_gain}")
         if self.intrinsic_gamma is not None and not 0.0 < self.intrinsic_gamma < 1.0:
             raise ValueError(f"ppo.intrinsic_gamma must be in (0, 1) or null, got {self.intrinsic_gamma}")
 
     max_grad_norm: float = 0.5
     hidden: tuple[int, ...] = (128, 128)
     embed: int = 32  # state and belief features are each embedded to this size first (0: no embedding)
+    # Initial weights of the belief-features embedding (actor and critic): None, PyTorch's default as in the
+    # reference code (uniform, bound 1/sqrt(inputs), biases too); a gain g: orthogonal weights × g, zero biases,
+    # so how far apart the policy starts to hold two beliefs is not a draw of its seed (docs/turnaround.md, H17).
+    feature_embed_gain: float | None = None
     init_log_std: float = 0.0
     norm_obs: bool = True
     norm_reward: bool = True

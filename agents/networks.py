@@ -25,12 +25,16 @@ def mlp(sizes: list[int], activation: type[nn.Module] = nn.Tanh, out_gain: float
 
 
 class Embed(nn.Module):
-    """Linear + ReLU embedding, or identity when `size` is 0."""
+    """Linear + ReLU embedding, or identity when `size` is 0. The Linear has PyTorch's default init, or
+    orthogonal weights × `gain` and zero biases when a gain is given."""
 
-    def __init__(self, in_dim: int, size: int):
+    def __init__(self, in_dim: int, size: int, gain: float | None = None):
         super().__init__()
         self.out_dim = size if size and in_dim else in_dim
         self.net = nn.Sequential(nn.Linear(in_dim, size), nn.ReLU()) if size and in_dim else nn.Identity()
+        if gain is not None and size and in_dim:
+            nn.init.orthogonal_(self.net[0].weight, gain)
+            nn.init.zeros_(self.net[0].bias)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         return self.net(x)

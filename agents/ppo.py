@@ -30,7 +30,7 @@ class ActorCritic(nn.Module):
         super().__init__()
 
         def trunk(out_dim: int, gain: float) -> nn.ModuleDict:
-            s, f = Embed(state_dim, config.embed), Embed(feature_dim, config.embed)
+            s, f = Embed(state_dim, config.embed), Embed(feature_dim, config.embed, config.feature_embed_gain)
             return nn.ModuleDict(
                 {
                     "state": s,

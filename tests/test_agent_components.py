@@ -263,6 +263,25 @@ def test_vae_error_bonus_is_the_reward_decoders_squared_error():
         VAEErrorBonus(RecurrentBelief(3, 2, RecurrentConfig()), "x")
 
 
+def test_feature_embed_gain_makes_the_belief_embedding_orthogonal_times_the_gain():
+    torch.manual_seed(0)
+    default = ActorCritic(7, 2, 3, PPOConfig())
+    scaled = ActorCritic(7, 2, 3, dataclasses.replace(PPOConfig(), feature_embed_gain=3.0))
+    for net in (scaled.actor, scaled.critic):
+        linear = net["features"].net[0]
+        # 32 x 2 weights with orthogonal columns of norm 3: W^T W = 9 I; no biases.
+        torch.testing.assert_close(linear.weight.T @ linear.weight, 9.0 * torch.eye(2), atol=1e-5, rtol=0)
+        assert not linear.bias.any()
+        # The state embedding keeps PyTorch's default: weights within 1/sqrt(inputs), biases drawn too.
+        state = net["state"].net[0]
+        assert state.weight.abs().max() <= 7**-0.5 and state.bias.any()
+    for net in (default.actor, default.critic):
+        linear = net["features"].net[0]
+        assert linear.weight.abs().max() <= 2**-0.5 and linear.bias.any()
+    with pytest.raises(ValueError, match="feature_embed_gain"):
+        PPOConfig(feature_embed_gain=0.0)
+
+
 # The per-step fast path ------------------------------------------------------------------------------
 @pytest.mark.parametrize("embed", [32, 0])
 def test_actor_critic_step_equals_mean_std_and_value_exactly_through_training(embed):
