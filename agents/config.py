@@ -71,7 +71,8 @@ class PPOConfig:
     embed: int = 32  # state and belief features are each embedded to this size first (0: no embedding)
     # Initial weights of the belief-features embedding (actor and critic): None, PyTorch's default as in the
     # reference code (uniform, bound 1/sqrt(inputs), biases too); a gain g: orthogonal weights × g, zero biases,
-    # so how far apart the policy starts to hold two beliefs is not a draw of its seed (docs/turnaround.md, H17).
+    # so how far apart the policy starts to hold two beliefs is not a draw of its seed (docs/turnaround.md, H17);
+    # every other network starts as without it.
     feature_embed_gain: float | None = None
     init_log_std: float = 0.0
     norm_obs: bool = True

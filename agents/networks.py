@@ -33,7 +33,9 @@ class Embed(nn.Module):
         self.out_dim = size if size and in_dim else in_dim
         self.net = nn.Sequential(nn.Linear(in_dim, size), nn.ReLU()) if size and in_dim else nn.Identity()
         if gain is not None and size and in_dim:
-            nn.init.orthogonal_(self.net[0].weight, gain)
+            # On a forked RNG: the networks built after this one draw exactly what they draw without a gain.
+            with torch.random.fork_rng(devices=[]):
+                nn.init.orthogonal_(self.net[0].weight, gain)
             nn.init.zeros_(self.net[0].bias)
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:

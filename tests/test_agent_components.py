@@ -266,7 +266,13 @@ def test_vae_error_bonus_is_the_reward_decoders_squared_error():
 def test_feature_embed_gain_makes_the_belief_embedding_orthogonal_times_the_gain():
     torch.manual_seed(0)
     default = ActorCritic(7, 2, 3, PPOConfig())
+    after_default = torch.randn(3)
+    torch.manual_seed(0)
     scaled = ActorCritic(7, 2, 3, dataclasses.replace(PPOConfig(), feature_embed_gain=3.0))
+    # Only the belief-features embedding differs: every other layer, and what is drawn after, is the same.
+    assert torch.equal(torch.randn(3), after_default)
+    for (name, a), (_, b) in zip(default.named_parameters(), scaled.named_parameters(), strict=True):
+        assert torch.equal(a, b) != (".features." in name), name
     for net in (scaled.actor, scaled.critic):
         linear = net["features"].net[0]
         # 32 x 2 weights with orthogonal columns of norm 3: W^T W = 9 I; no biases.
