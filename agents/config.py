@@ -175,7 +175,7 @@ class AgentConfig:
     state_keys: tuple[str, ...] | None = None  # None: every non-privileged observation key
     # Seed of the networks' initial weights (belief, actor-critic, bonus networks); None: the run's seed. The
     # run's seed still draws the tasks, the action noise and the minibatches, so a seed's outcome can be split
-    # into its initialisation and its experience (docs/turnaround.md, "init or stream").
+    # into its initialisation and its experience (docs/turnaround.md, runs 32-37).
     init_seed: int | None = None
     # The bonuses' networks (RND priors and predictors) exactly as a run with init_seed = bonus_init_seed would
     # start them, the belief's and actor-critic's from init_seed; None: all from init_seed.
