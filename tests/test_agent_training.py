@@ -98,8 +98,12 @@ def test_init_seed_and_bonus_init_seed_fix_the_initial_weights_and_nothing_else(
     mixed = built(2, init_seed=0, bonus_init_seed=2)
 
     def networks(agent, bonuses):
-        parts = [m for b in agent.bonuses for m in (b.priors, b.predictors)] if bonuses else [agent.model]
-        return [p.detach() for m in parts + ([] if bonuses else [agent.belief.modules]) for p in m.parameters()]
+        parts = (
+            [m for b in agent.bonuses for m in (b.priors, b.predictors)]
+            if bonuses
+            else [agent.model, agent.belief.modules]
+        )
+        return [p.detach() for m in parts for p in m.parameters()]
 
     for source, bonuses in ((reference, False), (own, True)):
         for a, b in zip(networks(mixed, bonuses), networks(source, bonuses), strict=True):
