@@ -57,6 +57,7 @@ class PPOConfig:
         _check_choice("ppo.value_loss", self.value_loss, ("mse", "clipped_huber"))
         _check_choice("ppo.minibatch_unit", self.minibatch_unit, ("envs", "transitions"))
         _check_choice("ppo.advantage_norm", self.advantage_norm, ("minibatch", "batch"))
+        _check_choice("ppo.network", self.network, ("cleanrl", "reference"))
         if self.sampled_action_cost < 0:
             raise ValueError(f"ppo.sampled_action_cost must be >= 0, got {self.sampled_action_cost}")
         if self.lr_anneal_frames is not None and self.lr_anneal_frames <= 0:
@@ -74,6 +75,10 @@ class PPOConfig:
     # so how far apart the policy starts to hold two beliefs is not a draw of its seed (docs/turnaround.md, H17);
     # every other network starts as without it.
     feature_embed_gain: float | None = None
+    # The actor-critic's network ("cleanrl": separate ReLU embeddings, orthogonal init, mean head ×0.01; or
+    # "reference": the reference code's tanh embeddings shared by actor and critic, normc init, mean head ×1;
+    # see agents/ppo.py ActorCritic). hidden, embed and feature_embed_gain apply to both.
+    network: str = "cleanrl"
     init_log_std: float = 0.0
     norm_obs: bool = True
     norm_reward: bool = True

@@ -10,14 +10,41 @@ import torch.nn.functional as F
 from torch import nn
 
 
-def mlp(sizes: list[int], activation: type[nn.Module] = nn.Tanh, out_gain: float = 1.0) -> nn.Sequential:
-    """Linear layers with `activation` between them (none after the last), orthogonal init."""
+def normc_(weight: torch.Tensor, gain: float = 1.0) -> torch.Tensor:
+    """OpenAI baselines' "normc" init, used by the reference code: N(0, 1) weights, each output unit's row
+    rescaled to norm `gain`."""
+    with torch.no_grad():
+        weight.normal_(0.0, 1.0)
+        weight *= gain / weight.pow(2).sum(1, keepdim=True).sqrt()
+    return weight
+
+
+def mlp(
+    sizes: list[int],
+    activation: type[nn.Module] = nn.Tanh,
+    out_gain: float | None = 1.0,
+    init: str = "orthogonal",
+) -> nn.Sequential:
+    """Linear layers with `activation` between them (none after the last), zero biases.
+
+    `init` "orthogonal": orthogonal weights, gain sqrt(2) on hidden layers; "normc": `normc_` rows of norm
+    `nn.init.calculate_gain(activation)` (5/3 for tanh), as the reference code. The last layer gets
+    `out_gain`; None leaves it at PyTorch's default init (the reference's critic head).
+    """
     layers: list[nn.Module] = []
     for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
         linear = nn.Linear(a, b)
         last = i == len(sizes) - 2
-        nn.init.orthogonal_(linear.weight, out_gain if last else np.sqrt(2))
-        nn.init.zeros_(linear.bias)
+        if init == "orthogonal":
+            hidden_gain = np.sqrt(2)
+        elif init == "normc":
+            hidden_gain = nn.init.calculate_gain(activation.__name__.lower())
+        else:
+            raise ValueError(f"mlp init must be 'orthogonal' or 'normc', got {init!r}")
+        gain = out_gain if last else hidden_gain
+        if gain is not None:
+            (nn.init.orthogonal_ if init == "orthogonal" else normc_)(linear.weight, gain)
+            nn.init.zeros_(linear.bias)
         layers.append(linear)
         if not last:
             layers.append(activation())
@@ -25,13 +52,13 @@ def mlp(sizes: list[int], activation: type[nn.Module] = nn.Tanh, out_gain: float
 
 
 class Embed(nn.Module):
-    """Linear + ReLU embedding, or identity when `size` is 0. The Linear has PyTorch's default init, or
-    orthogonal weights × `gain` and zero biases when a gain is given."""
+    """Linear + `activation` (ReLU) embedding, or identity when `size` is 0. The Linear has PyTorch's default
+    init, or orthogonal weights × `gain` and zero biases when a gain is given."""
 
-    def __init__(self, in_dim: int, size: int, gain: float | None = None):
+    def __init__(self, in_dim: int, size: int, gain: float | None = None, activation: type[nn.Module] = nn.ReLU):
         super().__init__()
         self.out_dim = size if size and in_dim else in_dim
-        self.net = nn.Sequential(nn.Linear(in_dim, size), nn.ReLU()) if size and in_dim else nn.Identity()
+        self.net = nn.Sequential(nn.Linear(in_dim, size), activation()) if size and in_dim else nn.Identity()
         if gain is not None and size and in_dim:
             # On a forked RNG: the networks built after this one draw exactly what they draw without a gain.
             with torch.random.fork_rng(devices=[]):

@@ -23,24 +23,35 @@ from hyperstate.agents.rollout import Rollout
 
 
 class ActorCritic(nn.Module):
-    """Separate actor and critic MLPs over embedded state ⊕ embedded belief features. The critic has one
-    output per return it learns (`value_heads`: the combined return, or extrinsic and intrinsic)."""
+    """Actor and critic MLPs over embedded state ⊕ embedded belief features. The critic has one output per
+    return it learns (`value_heads`: the combined return, or extrinsic and intrinsic).
+
+    `config.network` "cleanrl": actor and critic each embed their inputs (Linear + ReLU), orthogonal init,
+    the actor's mean head ×0.01 so that the first policy is near zero everywhere. "reference": the reference
+    code's network — one Linear + tanh embedding per input shared by actor and critic, normc init (rows of
+    norm 5/3, zero biases), the mean head normc ×1 (a first policy whose actions depend on state and belief at
+    full scale), the critic head at PyTorch's default init.
+    """
 
     def __init__(self, state_dim: int, feature_dim: int, action_dim: int, config: PPOConfig, value_heads: int = 1):
         super().__init__()
+        reference = config.network == "reference"
+        activation, init = (nn.Tanh, "normc") if reference else (nn.ReLU, "orthogonal")
 
-        def trunk(out_dim: int, gain: float) -> nn.ModuleDict:
-            s, f = Embed(state_dim, config.embed), Embed(feature_dim, config.embed, config.feature_embed_gain)
-            return nn.ModuleDict(
-                {
-                    "state": s,
-                    "features": f,
-                    "body": mlp([s.out_dim + f.out_dim, *config.hidden, out_dim], out_gain=gain),
-                }
+        def embeddings() -> tuple[Embed, Embed]:
+            return (
+                Embed(state_dim, config.embed, activation=activation),
+                Embed(feature_dim, config.embed, config.feature_embed_gain, activation=activation),
             )
 
-        self.actor = trunk(action_dim, 0.01)
-        self.critic = trunk(value_heads, 1.0)
+        def trunk(embedded: tuple[Embed, Embed], out_dim: int, gain: float | None) -> nn.ModuleDict:
+            s, f = embedded
+            body = mlp([s.out_dim + f.out_dim, *config.hidden, out_dim], out_gain=gain, init=init)
+            return nn.ModuleDict({"state": s, "features": f, "body": body})
+
+        actor_embeddings = embeddings()
+        self.actor = trunk(actor_embeddings, action_dim, 1.0 if reference else 0.01)
+        self.critic = trunk(actor_embeddings if reference else embeddings(), value_heads, None if reference else 1.0)
         self.log_std = nn.Parameter(torch.full((action_dim,), config.init_log_std))
         # The per-step path (`step`) runs the same layers as plain functions.
         parts = ("state", "features", "body")

@@ -288,13 +288,58 @@ def test_feature_embed_gain_makes_the_belief_embedding_orthogonal_times_the_gain
         PPOConfig(feature_embed_gain=0.0)
 
 
+def test_reference_network_is_the_reference_codes_actor_critic():
+    torch.manual_seed(0)
+    model = ActorCritic(7, 2, 3, PPOConfig(network="reference"), value_heads=2)
+    actor, critic = model.actor, model.critic
+    # One tanh embedding per input, shared by actor and critic (the same parameters, counted once).
+    assert actor["state"] is critic["state"] and actor["features"] is critic["features"]
+    for embed in (actor["state"], actor["features"]):
+        assert isinstance(embed.net[1], torch.nn.Tanh) and embed.net[0].bias.any()  # PyTorch's default init
+    assert isinstance(actor["body"][1], torch.nn.Tanh)
+    n_params = sum(p.numel() for p in model.parameters())
+    own = sum(p.numel() for net in (actor, critic) for p in net["body"].parameters())
+    embeddings = sum(p.numel() for e in (actor["state"], actor["features"]) for p in e.parameters())
+    assert n_params == own + embeddings + 3  # + log_std
+    # normc: hidden rows of norm 5/3 (tanh's gain), the mean head's rows of norm 1, zero biases ...
+    linears = [m for m in actor["body"] if isinstance(m, torch.nn.Linear)]
+    for linear, norm in zip(linears, [5 / 3, 5 / 3, 1.0], strict=True):
+        torch.testing.assert_close(linear.weight.norm(dim=1), torch.full((linear.out_features,), norm))
+        assert not linear.bias.any()
+    # ... and the critic's head at PyTorch's default (uniform within 1/sqrt(128), biases drawn).
+    head = [m for m in critic["body"] if isinstance(m, torch.nn.Linear)][-1]
+    assert head.weight.abs().max() <= 128**-0.5 and head.bias.any() and head.out_features == 2
+    # The first policy acts at full scale, and differently for the two beliefs; the cleanrl network's first
+    # policy is near zero everywhere (mean head x0.01).
+    state = torch.randn(256, 7)
+    forward, backward = (model.mean_std(state, torch.tensor([b] * 256))[0] for b in ([0.0, 1.0], [1.0, 0.0]))
+    cleanrl = ActorCritic(7, 2, 3, PPOConfig())
+    cleanrl_mean = cleanrl.mean_std(state, torch.tensor([[0.0, 1.0]] * 256))[0]
+    assert forward.abs().mean() > 0.1 and (forward - backward).abs().mean() > 0.02
+    assert cleanrl_mean.abs().mean() < 0.02
+    with pytest.raises(ValueError, match="ppo.network"):
+        PPOConfig(network="resnet")
+
+
+def test_reference_network_saves_and_loads_with_its_embeddings_still_shared(tmp_path):
+    torch.manual_seed(0)
+    model = ActorCritic(7, 2, 3, PPOConfig(network="reference"))
+    torch.save(model.state_dict(), tmp_path / "model.pt")
+    torch.manual_seed(1)
+    other = ActorCritic(7, 2, 3, PPOConfig(network="reference"))
+    other.load_state_dict(torch.load(tmp_path / "model.pt"))
+    assert other.actor["state"] is other.critic["state"]
+    for a, b in zip(model.parameters(), other.parameters(), strict=True):
+        assert torch.equal(a, b)
+
+
 # The per-step fast path ------------------------------------------------------------------------------
-@pytest.mark.parametrize("embed", [32, 0])
-def test_actor_critic_step_equals_mean_std_and_value_exactly_through_training(embed):
+@pytest.mark.parametrize("embed,network", [(32, "cleanrl"), (0, "cleanrl"), (32, "reference")])
+def test_actor_critic_step_equals_mean_std_and_value_exactly_through_training(embed, network):
     # `step` runs the layers as plain functions over the modules' own parameters: it must give the very
     # numbers of the module calls, and keep doing so after optimiser steps and load_state_dict.
     torch.manual_seed(0)
-    model = ActorCritic(7, 4, 3, dataclasses.replace(PPOConfig(), embed=embed))
+    model = ActorCritic(7, 4, 3, dataclasses.replace(PPOConfig(), embed=embed, network=network))
     state, features = torch.randn(16, 7), torch.randn(16, 4)
 
     def check():
@@ -312,7 +357,7 @@ def test_actor_critic_step_equals_mean_std_and_value_exactly_through_training(em
         optimizer.step()
         optimizer.zero_grad()
     check()
-    other = ActorCritic(7, 4, 3, dataclasses.replace(PPOConfig(), embed=embed))
+    other = ActorCritic(7, 4, 3, dataclasses.replace(PPOConfig(), embed=embed, network=network))
     model.load_state_dict(other.state_dict())
     check()
     assert torch.equal(model.step(state, features)[0], other.mean_std(state, features)[0])
