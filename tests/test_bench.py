@@ -218,3 +218,44 @@ def test_gait_probe_follows_every_nth_snapshot_then_the_final_agent(tmp_path):
     assert probe.probes(cell / "agent.pt", 3) == [(None, cell / "agent.pt")]
     assert probe.run_name(cell) == "fig2_20m: oracle_rh s0"
     assert probe.run_name(cell / "snapshots" / "agent_001996800.pt") == "fig2_20m: oracle_rh s0"
+
+
+def test_bonus_x_probe_moves_only_x_and_divides_by_the_deployed_median(tmp_path):
+    from hyperstate import agents
+    from hyperstate.evaluation.deploy import deploy, evaluation_tasks
+
+    probe = _load_bench("bonus_x_probe")
+    agent = agents.make("oracle_rh", **{"ppo.num_envs": 2})
+    agent.train("cheetah_dir_sparse", frames=400, progress=False)
+    agent.save(tmp_path / "agent.pt")
+    tasks = evaluation_tasks("cheetah_dir_sparse", 20)
+    row = probe.probe(str(tmp_path / "agent.pt"), tasks)
+    # Recomputed here: the saved agent's deployment, its bonus at the deployed hyper-states and with x at +10.
+    loaded = agents.Agent.load(tmp_path / "agent.pt")
+    d = deploy(loaded, "cheetah_dir_sparse", tasks)
+    flat = {k: v.reshape(-1, *v.shape[2:]) for k, v in d.observations.items()}
+    features = d.features.reshape(len(flat["x_displacement"]), -1)
+    deployed = loaded.bonus_values(flat, features)["0_rnd_hyperstate"]
+    moved = loaded.bonus_values({**flat, "x_displacement": np.full_like(flat["x_displacement"], 10.0)}, features)
+    assert row["bonus"] == "0_rnd_hyperstate"
+    assert row["median_bonus_deployed"] == pytest.approx(np.median(deployed), rel=1e-6)
+    assert row["at_x"]["+10"] == pytest.approx(np.median(moved["0_rnd_hyperstate"]) / np.median(deployed), rel=1e-6)
+    assert list(row["at_x"]) == ["-20", "-10", "-5", "+0", "+5", "+10", "+20"]
+    assert list(row["deployed_over_time"]) == ["0", "10", "50", "199"]
+    x = d.observations["x_displacement"][..., 0]
+    assert row["deployed_x_range"] == pytest.approx([x.min(), x.max()])
+
+
+def test_init_probe_sees_the_reference_networks_first_policy_act_and_this_projects_not():
+    probe = _load_bench("init_probe")
+    from hyperstate.evaluation.deploy import evaluation_tasks
+
+    tasks = evaluation_tasks("cheetah_dir_sparse", 4)
+    cleanrl = probe.probe("oracle_rh_icml", 0, {}, tasks)
+    reference = probe.probe("oracle_rh_icml", 0, {"ppo.network": "reference"}, tasks)
+    # Mean head x0.01: near-zero actions, the cheetah stays where it starts; the reference's acts at full scale.
+    assert cleanrl["mean_abs_action"] < 0.02 and cleanrl["deterministic"]["final_abs_x"] < 0.5
+    assert reference["mean_abs_action"] > 0.1 and reference["belief_action_difference"] > 0.02
+    for row in (cleanrl, reference):
+        assert set(row) == {"seed", "deterministic", "sampled", "mean_abs_action", "belief_action_difference"}
+        assert all(0.0 <= row[k]["left_zone"] <= 1.0 for k in ("deterministic", "sampled"))
