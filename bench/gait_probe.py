@@ -1,4 +1,4 @@
-"""Does a belief-oracle agent have the gait its way back needs? Deploy it told the task from the first step.
+"""Does an agent have the gait its way back needs? Deploy it told the task from the first step.
 
     .venv/bin/python bench/gait_probe.py runs/fig2_20m/cells/oracle_rh__cheetah_dir_sparse__s2 [CELL ...]
     .venv/bin/python bench/gait_probe.py CELL/snapshots/agent_000999936.pt ...   # saved agents work too
@@ -12,7 +12,12 @@ it on the way back. This deploys each cell's final agent (`agent.pt`; or each ag
 observation replaced by the one-hot of the true direction from the first step, so it never has to guess.
 Per direction it prints the online return, the final x and the mean speed towards the rewarded side over
 the episode (m/s). A policy with the gait runs the told direction from the start; one without walks.
-Only for agents whose belief reads the task's `belief` observation (the oracle).
+
+For an agent with a learned belief (variBAD, task-supervised, RL²'s features) there is no belief
+observation to replace: *told* then clamps the belief features the policy sees, from the first step, to
+the posterior its own encoder reaches on that direction — the mean final features of the as-trained
+deployments of that direction that left the zone (any exit reveals the direction: the far side pays,
+the wrong side charges). A direction no deployment left the zone on cannot be told (its row is blank).
 
 `--every N` probes every N-th kept snapshot of each cell (`snapshots/agent_<frames>.pt`) and the final
 agent, so the told speeds can be followed through training; `--json` writes every row, `--plot` draws
@@ -53,6 +58,37 @@ class Told:
         return self.agent.act(obs, state, deterministic=deterministic, reward=reward)
 
 
+class ToldPosterior:
+    """An agent with a learned belief whose policy sees, at every step, the belief features `revealed`
+    gives for its task's direction (+1 forward, -1 backward): the posterior it reaches once it knows."""
+
+    def __init__(self, agent, tasks: np.ndarray, revealed: dict[float, np.ndarray]):
+        self.agent = agent
+        self.features = torch.as_tensor(np.stack([revealed[float(t)] for t in np.asarray(tasks)[:, 0]]))
+
+    def act(self, obs, state=None, deterministic=True, reward=None):
+        belief = self.agent.belief
+        belief.features = lambda _state: self.features.to(torch.float32)  # shadows the method for this call
+        try:
+            return self.agent.act(obs, state, deterministic=deterministic, reward=reward)
+        finally:
+            del belief.features
+
+
+def revealed_posteriors(deployment, zone: float = 5.0) -> dict[float, np.ndarray]:
+    """Per direction (+1.0 / -1.0), the mean belief features at the last step of the deployments of that
+    direction that left the zone; directions none left the zone on are missing."""
+    x = deployment.observations["x_displacement"][..., 0]  # (T, M)
+    left = np.abs(x).max(0) >= zone
+    final = deployment.features[-1]  # (M, F)
+    out = {}
+    for sign in (1.0, -1.0):
+        m = (deployment.tasks[:, 0] == sign) & left
+        if m.any():
+            out[sign] = final[m].mean(0)
+    return out
+
+
 def per_direction(deployment) -> dict[str, dict[str, float]]:
     """Online return, final x and mean speed towards the rewarded side (m/s), per direction."""
     x = deployment.observations["x_displacement"][..., 0]  # (T, M), after each step
@@ -61,6 +97,9 @@ def per_direction(deployment) -> dict[str, dict[str, float]]:
     out = {}
     for name, sign in (("forward", 1.0), ("backward", -1.0)):
         m = d == sign
+        if not m.any():  # a direction the deployment has no task of (an untold one)
+            out[name] = {"online_return": None, "final_x": None, "speed": None}
+            continue
         out[name] = {
             "online_return": float(deployment.rewards[:, m].sum(0).mean()),
             "final_x": float(x[-1, m].mean()),
@@ -98,18 +137,23 @@ def plot(rows: list[dict], path: Path) -> None:
     runs = list(dict.fromkeys(r["run"] for r in rows))
     fig, ax = plt.subplots(figsize=(8, 4.5))
     for i, run in enumerate(runs):
-        told = [r for r in rows if r["run"] == run and r["deployment"] == "told the task" and r["frames"]]
+        told = [r for r in rows if r["run"] == run and r["deployment"].startswith("told") and r["frames"]]
         if not told:
             continue
         last = told[-1]
-        first = "forward" if last["forward"]["speed"] >= last["backward"]["speed"] else "backward"
+        speeds = {k: last[k]["speed"] if last[k]["speed"] is not None else -np.inf for k in ("forward", "backward")}
+        first = "forward" if speeds["forward"] >= speeds["backward"] else "backward"
         second = "backward" if first == "forward" else "forward"
         frames = [r["frames"] / 1e6 for r in told]
         colour = f"C{i % 10}"
-        ax.plot(frames, [r[first]["speed"] for r in told], color=colour, lw=1, alpha=0.5)
+
+        def speed(r: dict, direction: str) -> float:
+            return np.nan if r[direction]["speed"] is None else r[direction]["speed"]
+
+        ax.plot(frames, [speed(r, first) for r in told], color=colour, lw=1, alpha=0.5)
         ax.plot(
             frames,
-            [r[second]["speed"] for r in told],
+            [speed(r, second) for r in told],
             color=colour,
             lw=2,
             ls="--",
@@ -154,18 +198,31 @@ def main() -> None:
     for cell, label in zip(args.cells, labels, strict=True):
         for frames, path in probes(cell, args.every):
             agent = agents.Agent.load(path)
-            if "belief" not in agent.obs_spec or agent.config.belief != "oracle":
-                raise SystemExit(f"{path}: not a belief-oracle agent (belief {agent.config.belief!r})")
             name = label if cell.suffix != ".pt" else f"{label} {path.stem}"
-            for how, deployed in (("as trained", agent), ("told the task", Told(agent, tasks))):
-                r = per_direction(deploy(deployed, TASK, tasks))
+            as_trained = deploy(agent, TASK, tasks)
+            if agent.config.belief == "oracle":
+                told, how_told = Told(agent, tasks), "told the task"
+            elif agent.belief.feature_dim > 0:
+                revealed = revealed_posteriors(as_trained)
+                shown = np.asarray([t in revealed for t in tasks[:, 0]])
+                told = ToldPosterior(agent, tasks[shown], revealed) if shown.any() else None
+                how_told = "told: revealed posterior"
+            else:
+                raise SystemExit(f"{path}: the {agent.config.belief!r} belief has no features to tell")
+            r = per_direction(as_trained)
+            results = [("as trained", r)]
+            if told is not None:
+                told_tasks = tasks if agent.config.belief == "oracle" else tasks[shown]
+                results.append((how_told, per_direction(deploy(told, TASK, told_tasks))))
+            for how, r in results:
                 rows.append({"run": name, "frames": frames, "deployment": how, **r})
-                f, b = r["forward"], r["backward"]
-                print(
-                    f"| `{name}` | {frames or '—'} | {how} | {f['online_return']:.0f} | {f['final_x']:+.1f} "
-                    f"| {f['speed']:.1f} | {b['online_return']:.0f} | {b['final_x']:+.1f} | {b['speed']:.1f} |",
-                    flush=True,
-                )
+                cells = [
+                    f"{v['online_return']:.0f} | {v['final_x']:+.1f} | {v['speed']:.1f}"
+                    if v["online_return"] is not None
+                    else " | "
+                    for v in (r["forward"], r["backward"])
+                ]
+                print(f"| `{name}` | {frames or '—'} | {how} | {cells[0]} | {cells[1]} |", flush=True)
     if args.json:
         args.json.parent.mkdir(parents=True, exist_ok=True)
         args.json.write_text(json.dumps(rows, indent=1) + "\n")

@@ -197,6 +197,69 @@ def test_gait_probe_tells_the_agent_the_truth_and_measures_each_direction():
     assert result["backward"] == pytest.approx({"online_return": 0.0, "final_x": -4.0, "speed": 0.4})
 
 
+def test_gait_probe_tells_a_learned_belief_its_revealed_posterior():
+    from types import SimpleNamespace
+
+    import torch
+
+    probe = _load_bench("gait_probe")
+    # Four deployments (forward, backward, forward, backward) with 3 belief features; the second forward one
+    # never leaves the zone, so only the first forward one's final features reveal the forward posterior.
+    x = np.zeros((3, 4, 1))
+    x[:, 0, 0], x[:, 1, 0], x[:, 2, 0], x[:, 3, 0] = [1, 6, 9], [-2, -5, -4], [1, 2, 3], [0, -7, -8]
+    features = np.zeros((3, 4, 3))
+    features[-1] = [[1.0, 2.0, 3.0], [-1.0, 0.0, 1.0], [50.0, 50.0, 50.0], [-3.0, 0.0, 3.0]]
+    tasks = np.array([[1.0], [-1.0], [1.0], [-1.0]])
+    deployment = SimpleNamespace(observations={"x_displacement": x}, features=features, tasks=tasks)
+    revealed = probe.revealed_posteriors(deployment)
+    np.testing.assert_allclose(revealed[1.0], [1.0, 2.0, 3.0])
+    np.testing.assert_allclose(revealed[-1.0], [-2.0, 0.0, 2.0])  # both backward deployments left the zone
+    stayed = SimpleNamespace(observations={"x_displacement": x[:, 2:3]}, features=features[:, 2:3], tasks=tasks[2:3])
+    assert probe.revealed_posteriors(stayed) == {}  # nothing left the zone: nothing to tell
+
+    seen = []
+
+    class Belief:
+        def features(self, state):
+            return torch.zeros(2, 3)
+
+    class Recorder:
+        belief = Belief()
+
+        def act(self, obs, state=None, deterministic=True, reward=None):
+            seen.append(self.belief.features(state).clone())
+            return np.zeros((2, 6)), state
+
+    agent = Recorder()
+    told = probe.ToldPosterior(agent, np.array([[-1.0], [1.0]]), revealed)
+    told.act({})
+    torch.testing.assert_close(seen[0], torch.tensor([[-2.0, 0.0, 2.0], [1.0, 2.0, 3.0]]))
+    assert torch.equal(agent.belief.features(None), torch.zeros(2, 3))  # the agent's own method is back
+    result = probe.per_direction(
+        SimpleNamespace(observations={"x_displacement": x[:, 1:2]}, tasks=tasks[1:2], rewards=np.ones((3, 1)))
+    )
+    assert result["forward"] == {"online_return": None, "final_x": None, "speed": None}
+
+
+def test_gait_probe_runs_on_a_varibad_agent(tmp_path):
+    from hyperstate import agents
+
+    agent = agents.make("varibad", **{"ppo.num_envs": 2})
+    agent.train("cheetah_dir_sparse", frames=400, progress=False)
+    agent.save(tmp_path / "agent.pt")
+    env = {**os.environ, "MUJOCO_GL": "disable"}
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "bench" / "gait_probe.py"), str(tmp_path / "agent.pt"), "--json",
+         str(tmp_path / "gait.json")],
+        capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    rows = json.loads((tmp_path / "gait.json").read_text())
+    assert rows[0]["deployment"] == "as trained" and rows[0]["forward"]["online_return"] is not None
+    # An untrained policy leaves the zone on no task: there is no revealed posterior, so no told row.
+    assert [r["deployment"] for r in rows] in (["as trained"], ["as trained", "told: revealed posterior"])
+
+
 def test_gait_probe_follows_every_nth_snapshot_then_the_final_agent(tmp_path):
     probe = _load_bench("gait_probe")
     cell = tmp_path / "fig2_20m" / "cells" / "oracle_rh__cheetah_dir_sparse__s0"
