@@ -31,19 +31,19 @@ def mlp(
     `nn.init.calculate_gain(activation)` (5/3 for tanh), as the reference code. The last layer gets
     `out_gain`; None leaves it at PyTorch's default init (the reference's critic head).
     """
+    if init == "orthogonal":
+        init_weight, hidden_gain = nn.init.orthogonal_, np.sqrt(2)
+    elif init == "normc":
+        init_weight, hidden_gain = normc_, nn.init.calculate_gain(activation.__name__.lower())
+    else:
+        raise ValueError(f"mlp init must be 'orthogonal' or 'normc', got {init!r}")
     layers: list[nn.Module] = []
     for i, (a, b) in enumerate(zip(sizes[:-1], sizes[1:], strict=True)):
         linear = nn.Linear(a, b)
         last = i == len(sizes) - 2
-        if init == "orthogonal":
-            hidden_gain = np.sqrt(2)
-        elif init == "normc":
-            hidden_gain = nn.init.calculate_gain(activation.__name__.lower())
-        else:
-            raise ValueError(f"mlp init must be 'orthogonal' or 'normc', got {init!r}")
         gain = out_gain if last else hidden_gain
         if gain is not None:
-            (nn.init.orthogonal_ if init == "orthogonal" else normc_)(linear.weight, gain)
+            init_weight(linear.weight, gain)
             nn.init.zeros_(linear.bias)
         layers.append(linear)
         if not last:
