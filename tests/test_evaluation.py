@@ -434,7 +434,7 @@ def test_cell_store_copies_the_checkpoint_last_and_only_what_changed(tmp_path):
 
 def test_ray_storage_must_be_empty_unless_resuming(tmp_path):
     (tmp_path / "storage" / "cells" / "some_cell").mkdir(parents=True)
-    common = f"--agents oracle --tasks cheetah_dir --frames 200 --executor ray --storage {tmp_path / 'storage'}"
+    common = "--agents oracle --tasks cheetah_dir --frames 200 --executor ray --storage {tmp_path / 'storage'}"
     proc = run(f"{common} --out {tmp_path / 'out'}".split())
     assert proc.returncode == 2 and "holds cells of an earlier run" in proc.stderr
     proc = run(f"--agents oracle --tasks cheetah_dir --frames 200 --storage {tmp_path} --out {tmp_path / 'o'}".split())
@@ -706,3 +706,78 @@ def test_several_config_files_merge_in_order(tmp_path):
         "bonuses.0.buffer_size": 5,
         "bonuses.0.weight": 3.0,
     }
+
+
+def test_merge_gathers_grids_run_in_parts_and_refuses_parts_of_other_experiments(tmp_path, tiny_config, capsys):
+    """A grid run in parts (other seeds, other sessions) merges into one report; a part trained with another
+    config or budget is refused; unfinished cells are left out; merging again changes nothing."""
+    import shutil
+
+    from hyperstate.evaluation.merge import main as merge_main
+
+    common = "--agents oracle --tasks cheetah_dir_sparse --frames 400 --eval-every 200 --eval-tasks 4 --no-reference "
+    common += "--workers 1 --no-progress --config"
+    other = tmp_path / "other.toml"
+    other.write_text(TINY_CONFIG + '"ppo.entropy_coef" = 0.5\n')
+    parts = {}
+    for name, seed, config in (("a", 0, tiny_config), ("b", 1, tiny_config), ("c", 2, other)):
+        parts[name] = tmp_path / name
+        proc = run(f"{common} {config} --seeds {seed} --out {parts[name]}".split())
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    into = tmp_path / "merged"
+    assert merge_main([str(parts["a"]), str(parts["b"]), "--into", str(into)]) == 0
+    merged = {r["seed"]: r for r in json.loads((into / "results.json").read_text())}
+    for seed, part in ((0, parts["a"]), (1, parts["b"])):
+        (source,) = json.loads((part / "results.json").read_text())
+        assert merged[seed] == source
+        cell = into / "cells" / f"oracle__cheetah_dir_sparse__s{seed}"
+        assert sorted(p.name for p in cell.iterdir()) == ["coverage.npy", "deployment.npz", "record.json"]
+    with (into / "summary.csv").open() as f:
+        (row,) = list(csv.DictReader(f))
+    assert row["seeds"] == "2"
+    assert float(row["online_return_mean"]) == pytest.approx(
+        np.mean([r["final"]["online_return"] for r in merged.values()])
+    )
+    assert (into / "figures" / "curves_cheetah_dir_sparse.png").read_bytes()[:4] == b"\x89PNG"
+    assert (into / "figures" / "behaviour_oracle__cheetah_dir_sparse__s0.png").exists()
+    sources = json.loads((into / "sources.json").read_text())
+    assert sources["oracle__cheetah_dir_sparse__s1"]["source"] == str(parts["b"])
+    assert sources["oracle__cheetah_dir_sparse__s1"]["budget"] == 400
+    assert sources["oracle__cheetah_dir_sparse__s1"]["overrides"]["ppo.num_envs"] == 4
+    before = (into / "results.json").read_text()
+
+    # Another config for the same agent: refused, naming the field, and nothing written.
+    assert merge_main([str(parts["c"]), "--into", str(into)]) == 2
+    assert (into / "results.json").read_text() == before and not (
+        into / "cells" / "oracle__cheetah_dir_sparse__s2"
+    ).exists()
+    # Another budget (the part's grid asked for more frames): refused.
+    longer = tmp_path / "longer"
+    shutil.copytree(parts["a"], longer)
+    shutil.move(
+        longer / "cells" / "oracle__cheetah_dir_sparse__s0", longer / "cells" / "oracle__cheetah_dir_sparse__s3"
+    )
+    record_path = longer / "cells" / "oracle__cheetah_dir_sparse__s3" / "record.json"
+    record = json.loads(record_path.read_text())
+    record["seed"] = 3
+    record_path.write_text(json.dumps(record))
+    grid_args = json.loads((longer / "grid.json").read_text())
+    (longer / "grid.json").write_text(json.dumps({**grid_args, "frames": 800}))
+    assert merge_main([str(longer), "--into", str(into)]) == 2
+    assert "training budgets differ" in capsys.readouterr().err
+    # The same budget: seed 3 joins; an unfinished cell beside it is left out.
+    (longer / "grid.json").write_text(json.dumps(grid_args))
+    unfinished = longer / "cells" / "oracle__cheetah_dir_sparse__s4"
+    unfinished.mkdir()
+    (unfinished / "record.json").write_text(json.dumps({**record, "seed": 4, "complete": False, "final": None}))
+    assert merge_main([str(longer), "--into", str(into)]) == 0
+    assert sorted(r["seed"] for r in json.loads((into / "results.json").read_text())) == [0, 1, 3]
+    # Merging a part again changes nothing; the same cell with other results needs --replace.
+    assert merge_main([str(parts["b"]), "--into", str(into)]) == 0
+    changed = json.loads((parts["b"] / "cells" / "oracle__cheetah_dir_sparse__s1" / "record.json").read_text())
+    changed["final"]["online_return"] += 1.0
+    (parts["b"] / "cells" / "oracle__cheetah_dir_sparse__s1" / "record.json").write_text(json.dumps(changed))
+    assert merge_main([str(parts["b"]), "--into", str(into)]) == 2
+    assert merge_main([str(parts["b"]), "--into", str(into), "--replace"]) == 0
+    merged = {r["seed"]: r for r in json.loads((into / "results.json").read_text())}
+    assert merged[1]["final"]["online_return"] == changed["final"]["online_return"]
