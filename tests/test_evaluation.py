@@ -582,6 +582,35 @@ def test_figure_2_config_is_valid():
     assert all(o == {"physics_threads": 1} for o in overrides.values())
 
 
+def test_turnaround_grid_script_runs_every_preset_with_the_turnaround_settings():
+    """bench/reproduce_fig2_turnaround.sh: the six presets and the reference, each with the reference's PPO,
+    noise and network on the 5e7-frame learning-rate schedule over bench/fig2.toml (docs/turnaround.md)."""
+    import re
+
+    from hyperstate.evaluation.run import build_grid, parse_args
+
+    script = (ROOT / "bench" / "reproduce_fig2_turnaround.sh").read_text()
+    presets = re.search(r"AGENTS:-([^}]*)}", script).group(1).split()
+    configs = re.search(r"--config (.*?) --workers", script.replace("\\\n", " "), re.S).group(1).split()
+    args = parse_args(
+        ["--import", str(ROOT / "bench" / "fig2_presets.py"), "--agents", *presets, "--tasks", "cheetah_dir_sparse"]
+        + ["--frames", "1000", "--out", "unused", "--no-reference", "--config", *(str(ROOT / c) for c in configs)]
+    )
+    try:
+        names, overrides = build_grid(args)
+    finally:
+        agents.PRESETS.pop("oracle_rh_prior5", None)
+        sys.modules.pop("fig2_presets", None)
+    assert set(names) == {"oracle", "oracle_rs", "oracle_rh", "varibad", "varibad_rh", "hyperx", "task_aware"}
+    for name in names:
+        config = agents.make(name, **overrides[name]).config
+        assert config.ppo.network == "reference" and config.ppo.lr_anneal_frames == 50_000_000
+        assert config.ppo.num_envs == 16 and config.ppo.minibatch_unit == "transitions"  # icml_ppo over fig2's 32
+        assert config.ppo.entropy_coef == 1e-4 and config.ppo.sampled_action_cost == 0.05
+    assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 4  # fig2.toml's bonus settings stay
+    assert "--eval-every $((FRAMES / 10))" in script and "--no-reference" in script
+
+
 @pytest.mark.parametrize("path", sorted((ROOT / "bench" / "turnaround").glob("*.toml")), ids=lambda p: p.stem)
 def test_turnaround_configs_apply_on_top_of_the_figure_2_config(path):
     """Each campaign config (docs/turnaround.md) names real fields and changes what it says it changes: its
