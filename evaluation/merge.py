@@ -26,7 +26,7 @@ from pathlib import Path
 
 from hyperstate.evaluation import grid
 from hyperstate.evaluation.cell import load_records, write_json_atomic, write_results
-from hyperstate.evaluation.report import summary_rows, text_table, write_figures, write_summary
+from hyperstate.evaluation.report import text_table, write_figures, write_summary
 
 SOURCES = "sources.json"
 # What a merged cell keeps: the record and what the report draws from; agent.pt only with --with-agent.
@@ -68,13 +68,14 @@ def _describe_cell(record: dict, source: Path) -> dict:
     }
 
 
-def plan(into: Path, parts: list[Path], replace: bool = False) -> tuple[dict[str, tuple[Path, dict]], list[str]]:
-    """The cells to copy ({cell: (part folder, source description)}) and the notes to print (cells left out),
-    or MergeError if the parts and the cells already in `into` do not make one grid."""
+def plan(into: Path, parts: list[Path], replace: bool = False) -> tuple[dict[str, Path], dict[str, dict], list[str]]:
+    """The cells to copy ({cell: part folder}), `into`'s sources.json as it will be after the copy, and the
+    notes to print (cells left out); MergeError if the parts and the cells already in `into` do not make one
+    grid."""
     sources_path = into / SOURCES
     known: dict[str, dict] = json.loads(sources_path.read_text()) if sources_path.exists() else {}
     records = {grid.record_cell_id(r): r for r in load_records(into)}
-    copies: dict[str, tuple[Path, dict]] = {}
+    copies: dict[str, Path] = {}
     notes: list[str] = []
     for part in parts:
         if not (part / grid.CELLS).is_dir():
@@ -86,14 +87,14 @@ def plan(into: Path, parts: list[Path], replace: bool = False) -> tuple[dict[str
                 notes.append(f"{cell} in {part}: not finished ({last:,} of {record['frames']:,} frames), left out")
                 continue
             if cell in copies:
-                raise MergeError(f"{cell} is in two parts: {copies[cell][0]} and {part}")
+                raise MergeError(f"{cell} is in two parts: {copies[cell]} and {part}")
             if cell in records and not replace:
                 if records[cell].get("curve") == record.get("curve") and records[cell]["final"] == record["final"]:
                     continue  # merged before
                 raise MergeError(f"{cell} is already in {into} with other results (--replace to take {part}'s)")
-            copies[cell] = (part, _describe_cell(record, part))
+            copies[cell] = part
             records[cell] = record
-            known[cell] = copies[cell][1]
+            known[cell] = _describe_cell(record, part)
     problems = []
     shared = (("budget", "training budgets"), ("eval_every", "evaluation points"), ("eval_tasks", "held-out tasks"))
     for key, what in shared:
@@ -114,16 +115,17 @@ def plan(into: Path, parts: list[Path], replace: bool = False) -> tuple[dict[str
                 )
     if problems:
         raise MergeError("the parts do not make one grid:\n  " + "\n  ".join(problems))
-    return copies, notes
+    return copies, known, notes
 
 
-def merge(into: Path, parts: list[Path], with_agent: bool = False, replace: bool = False) -> list[str]:
-    """Copies the finished cells of `parts` into `into` and rewrites its report; returns the notes."""
-    copies, notes = plan(into, parts, replace)
-    sources_path = into / SOURCES
-    sources = json.loads(sources_path.read_text()) if sources_path.exists() else {}
+def merge(
+    into: Path, parts: list[Path], with_agent: bool = False, replace: bool = False
+) -> tuple[list[str], list[dict]]:
+    """Copies the finished cells of `parts` into `into` and rewrites its report; returns the notes and the
+    summary rows."""
+    copies, sources, notes = plan(into, parts, replace)
     files = CELL_FILES + ((grid.AGENT,) if with_agent else ())
-    for cell, (part, description) in sorted(copies.items()):
+    for cell, part in sorted(copies.items()):
         target = grid.cell_dir(into, cell)
         if target.exists():
             shutil.rmtree(target)
@@ -132,15 +134,14 @@ def merge(into: Path, parts: list[Path], with_agent: bool = False, replace: bool
             path = grid.cell_dir(part, cell) / name
             if path.exists():
                 shutil.copy2(path, target / name)
-        sources[cell] = description
         notes.append(f"{cell}: from {part}")
     into.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(sources_path, dict(sorted(sources.items())))
+    write_json_atomic(into / SOURCES, dict(sorted(sources.items())))
     write_results(into)
     records = load_records(into)
-    write_summary(into, records)
+    rows = write_summary(into, records)
     write_figures(into, records)
-    return notes
+    return notes, rows
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -153,13 +154,13 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--replace", action="store_true", help="a part's cell replaces the same cell already merged")
     args = p.parse_args(argv)
     try:
-        notes = merge(args.into, args.parts, args.with_agent, args.replace)
+        notes, rows = merge(args.into, args.parts, args.with_agent, args.replace)
     except MergeError as e:
         print(f"evaluation/merge.py: error: {e}", file=sys.stderr)
         return 2
     print(*notes, sep="\n")
     print()
-    print(text_table(summary_rows(load_records(args.into))))
+    print(text_table(rows))
     return 0
 
 
