@@ -434,7 +434,7 @@ def test_cell_store_copies_the_checkpoint_last_and_only_what_changed(tmp_path):
 
 def test_ray_storage_must_be_empty_unless_resuming(tmp_path):
     (tmp_path / "storage" / "cells" / "some_cell").mkdir(parents=True)
-    common = "--agents oracle --tasks cheetah_dir --frames 200 --executor ray --storage {tmp_path / 'storage'}"
+    common = f"--agents oracle --tasks cheetah_dir --frames 200 --executor ray --storage {tmp_path / 'storage'}"
     proc = run(f"{common} --out {tmp_path / 'out'}".split())
     assert proc.returncode == 2 and "holds cells of an earlier run" in proc.stderr
     proc = run(f"--agents oracle --tasks cheetah_dir --frames 200 --storage {tmp_path} --out {tmp_path / 'o'}".split())
