@@ -92,6 +92,10 @@ class Belief(Protocol):
     def train_step(self, trajectories: Trajectories) -> dict[str, float]:
         """One update of the belief's own objective; returns logged losses ({} if untrained)."""
 
+    # Optional, for trainable beliefs: `replay_features(trajectories) -> (B, T+1, feature_dim)`, the features
+    # of b_0 … b_T of stored trajectories under the current model, without gradients (bonuses with
+    # `train_on="replay"` train on them).
+
     def state_dict(self) -> dict: ...
 
     def load_state_dict(self, state: dict) -> None: ...
@@ -398,6 +402,12 @@ class VariBADBelief:
 
     def sequence_features(self, rollout, env_index):
         return rollout.features[:, env_index]
+
+    def replay_features(self, trajectories: Trajectories) -> torch.Tensor:
+        """(B, T+1, F) posteriors of stored trajectories under the current encoder, prior first."""
+        with torch.no_grad():
+            mean, logvar = self.encoder.sequence(trajectories.actions, trajectories.rewards, trajectories.states[:, 1:])
+        return torch.cat([mean, logvar], dim=-1)
 
     # Training ---------------------------------------------------------------------------------
     def sample_latent(self, mean: torch.Tensor, logvar: torch.Tensor) -> torch.Tensor:

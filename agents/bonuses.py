@@ -31,6 +31,10 @@ class BonusInput:
     next_state: torch.Tensor  # raw s_{t+1} (the final observation where the BAMDP episode ended)
     features: torch.Tensor  # belief features b_t
     next_features: torch.Tensor  # belief features b_{t+1}, after observing s_{t+1}
+    # `replay(n)`: about n transitions drawn from the whole trajectories the belief stores, with the belief
+    # recomputed by its current model (a `BonusInput` without `replay`), or None while none is stored; None
+    # where the belief stores none. For bonuses that train on replayed experience (`BonusConfig.train_on`).
+    replay: Callable[[int], BonusInput | None] | None = None
 
 
 class Bonus(Protocol):
@@ -129,6 +133,12 @@ class EnsembleRND:
         _no_params(config)
         if config.kind == "rnd" and config.ensemble_size != 1:
             raise ValueError("kind 'rnd' has ensemble_size 1; use kind 'ensemble_rnd' for an ensemble")
+        replays = belief.trainable and callable(getattr(belief, "replay_features", None))
+        if config.train_on == "replay" and not replays:
+            raise ValueError(
+                f"train_on 'replay' needs a belief that stores trajectories and recomputes its features "
+                f"(replay_features: varibad, task_supervised); {type(belief).__name__} does not"
+            )
         return cls(InputSelector(config.input, state_columns, belief.feature_dim), config, generator, name)
 
     def __init__(self, selector: InputSelector, config: BonusConfig, generator: torch.Generator, name: str):
@@ -177,16 +187,33 @@ class EnsembleRND:
             return self.uncertainty(self.errors(x), self.config.beta, self.config.aleatoric)
 
     def update(self, batch: BonusInput) -> dict[str, float]:
+        if self.config.train_on == "replay":
+            return self._fit([self._replayed(batch) for _ in range(self.config.updates_per_iteration)])
         x = self.selector(batch).numpy().astype(np.float32)
         n = len(x)
         idx = (self.buffer_pos + np.arange(n)) % self.config.buffer_size
         self.buffer[idx[-self.config.buffer_size :]] = x[-self.config.buffer_size :]
         self.buffer_pos = int((self.buffer_pos + n) % self.config.buffer_size)
         self.buffer_len = min(self.buffer_len + n, self.config.buffer_size)
-        losses = []
+        minibatches = []
         for _ in range(self.config.updates_per_iteration):
             rows = torch.randint(self.buffer_len, (self.config.batch_size,), generator=self.generator)
-            loss = self.errors(self._normalized(torch.from_numpy(self.buffer[rows.numpy()]))).mean()
+            minibatches.append(torch.from_numpy(self.buffer[rows.numpy()]))
+        return self._fit(minibatches)
+
+    def _replayed(self, batch: BonusInput) -> torch.Tensor:
+        """One minibatch of replayed inputs; until the belief has stored a whole trajectory, rows of `batch`."""
+        replayed = batch.replay(self.config.batch_size) if batch.replay is not None else None
+        if replayed is not None:
+            return self.selector(replayed).float()
+        x = self.selector(batch)
+        return x[torch.randint(len(x), (self.config.batch_size,), generator=self.generator)].float()
+
+    def _fit(self, minibatches: list[torch.Tensor]) -> dict[str, float]:
+        """One predictor step per minibatch of raw inputs."""
+        losses = []
+        for x in minibatches:
+            loss = self.errors(self._normalized(x)).mean()
             self.optimizer.zero_grad()
             loss.backward()
             self.optimizer.step()

@@ -144,6 +144,12 @@ class BonusConfig:
     # every weight and bias, as the reference code does (rnd_init_weight_scale).
     prior_scaling: str = "output"
     clip: float | None = None  # clip this bonus to ±clip after normalisation, before weighting (reference oracle: 10)
+    # What the predictor trains on. "rollout": minibatches from a ring buffer of the last `buffer_size` inputs,
+    # beliefs as collected. "replay": minibatches drawn from the whole trajectories the belief stores for its
+    # own training (⌊√batch_size⌋ steps of each of batch_size // ⌊√batch_size⌋ trajectories), the belief
+    # recomputed by its current model, as the reference code trains the RND of its variBAD agents (whose
+    # latent drifts as the encoder learns); needs a belief with `replay_features` (varibad, task_supervised).
+    train_on: str = "rollout"
     # Linear annealing of this bonus's weight to 0 at this fraction of training (1.0: at the end, the reference's
     # schedule; 0.5: twice as fast, e.g. a state bonus annealed before the hyper-state one); None: constant,
     # unless AgentConfig.anneal_bonus anneals every bonus over the whole run.
@@ -154,6 +160,7 @@ class BonusConfig:
     def __post_init__(self) -> None:
         _check_choice("input_norm", self.input_norm, ("running", "none"))
         _check_choice("prior_scaling", self.prior_scaling, ("output", "weights"))
+        _check_choice("train_on", self.train_on, ("rollout", "replay"))
         if self.clip is not None and not self.clip > 0:
             raise ValueError(f"clip must be positive or null, got {self.clip}")
         if self.anneal_until is not None and not self.anneal_until > 0:

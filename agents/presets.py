@@ -42,13 +42,14 @@ PRESETS: dict[str, AgentConfig] = {
     "hyperx": AgentConfig(belief="varibad", bonuses=(HYPERSTATE_BONUS, STATE_BONUS)),
     "task_supervised": AgentConfig(belief="task_supervised"),
     # HyperX as in the reference code: hyper-state RND x0.1 + VAE-error bonus x1.0, no state bonus, and the
-    # reference's VAE buffer of 10,000 trajectories (the other presets keep 1,000).
+    # reference's VAE buffer of 10,000 trajectories (the other presets keep 1,000), from which the RND's
+    # predictor draws its inputs, latents recomputed by the current encoder.
     "hyperx_icml": AgentConfig(
         belief="varibad",
         ppo=ICML_PPO,
         vae=VAEConfig(buffer_trajectories=10_000),
         bonuses=(
-            dataclasses.replace(_ICML_RND, weight=0.1),
+            dataclasses.replace(_ICML_RND, weight=0.1, train_on="replay"),
             BonusConfig(kind="vae_error", input="belief", weight=1.0),
         ),
         anneal_bonus=True,

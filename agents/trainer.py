@@ -425,6 +425,10 @@ class Trainer:
         extrinsic = rollout.rewards.numpy().astype(np.float64)
         log: dict[str, Any] = {"reward/extrinsic_mean": float(extrinsic.mean())}
         self.clock.start()
+        if policy.belief.trainable:
+            # Stored before the bonuses, so that those trained on replayed trajectories see this rollout's too.
+            self.store_trajectories(lasts)
+        self.clock.mark("belief_training")
         if p.sampled_action_cost > 0:
             extrinsic = extrinsic - p.sampled_action_cost * self.excess_action_energy(rollout.actions.numpy())
         raw_bonuses = []
@@ -436,6 +440,7 @@ class Trainer:
                 next_state=rollout.next_state.reshape(t_len * n, -1),
                 features=rollout.features.reshape(t_len * n, -1),
                 next_features=rollout.next_features.reshape(t_len * n, -1),
+                replay=self.replayed_inputs if policy.belief.trainable else None,
             )
             for bonus in policy.bonuses:
                 raw_bonuses.append(bonus.reward(flat).numpy().astype(np.float64).reshape(t_len, n))
@@ -494,7 +499,6 @@ class Trainer:
         log.update(ppo_update(policy.model, policy.belief, state.optimizer, rollout, p, policy.generator))
         self.clock.mark("ppo")
         if policy.belief.trainable:
-            self.store_trajectories(lasts)
             if state.trajectories.items:
                 losses = [
                     policy.belief.train_step(state.trajectories.sample(cfg.vae.batch_trajectories, policy.generator))
@@ -503,6 +507,32 @@ class Trainer:
                 log.update({k: float(np.mean([x[k] for x in losses])) for k in losses[0]})
         self.clock.mark("belief_training")
         return log
+
+    def replayed_inputs(self, n: int) -> BonusInput | None:
+        """About `n` transitions from the stored whole trajectories, the belief recomputed by its current model
+        (`BonusInput.replay`): ⌊√n⌋ steps, drawn with replacement, of each of n // ⌊√n⌋ trajectories, as the
+        reference code draws its RND's inputs from the VAE's buffer. None while no trajectory is stored."""
+        if not self.state.trajectories.items:
+            return None
+        per_trajectory = max(1, math.isqrt(n))
+        count = max(1, n // per_trajectory)
+        generator = self.policy.generator
+        trajectories = self.state.trajectories.sample(count, generator)
+        features = self.policy.belief.replay_features(trajectories)  # (B, T+1, F): b_0 … b_T
+        steps = torch.randint(trajectories.actions.shape[1], (count, per_trajectory), generator=generator)
+        rows = torch.arange(count)[:, None]
+
+        def pick(x: torch.Tensor, offset: int = 0) -> torch.Tensor:
+            return x[rows, steps + offset].reshape(count * per_trajectory, -1)
+
+        return BonusInput(
+            state=pick(trajectories.states),
+            action=pick(trajectories.actions),
+            reward=pick(trajectories.rewards),
+            next_state=pick(trajectories.states, 1),
+            features=pick(features),
+            next_features=pick(features, 1),
+        )
 
     def excess_action_energy(self, actions: np.ndarray) -> np.ndarray:
         """|a|² − |clip(a)|² per step of sampled (T, N, A) actions: what a control cost on the sampled action

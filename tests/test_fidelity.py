@@ -189,6 +189,7 @@ def test_icml_presets_are_the_reference_configurations():
         1,
     )
     assert hyperx.anneal_bonus and hyperx.belief == "varibad"
+    assert rnd.train_on == "replay"  # its inputs drawn from the VAE's buffer, latents recomputed
     assert hyperx.vae.buffer_trajectories == 10_000  # the reference's; the seed presets keep 1,000
     assert hyperx.ppo.entropy_coef == 1e-4 and hyperx.ppo.sampled_action_cost == 0.05
     oracle = agents.get_preset("oracle_rh_icml")
@@ -200,6 +201,7 @@ def test_icml_presets_are_the_reference_configurations():
         10_000_000,
         "none",
     )
+    assert rnd.train_on == "rollout"  # the reference's oracle keeps its own buffer of (state, belief) inputs
     for preset in (hyperx, oracle):
         p = preset.ppo
         assert (p.minibatch_unit, p.advantage_norm, p.value_loss, p.sampled_action_cost) == (
@@ -211,3 +213,95 @@ def test_icml_presets_are_the_reference_configurations():
             )
             == PPOConfig()
         )  # fmt: skip  (else the reference's PPO)
+
+
+def _replay_trainer(**overrides) -> Trainer:
+    # BAMDP episodes of 20 steps: a 50-step rollout stores two whole trajectories per env.
+    config = {**TINY, "bonuses.0.train_on": "replay", "bonuses.0.batch_size": 16, **overrides}
+    return Trainer(agents.make("hyperx_icml", **config), "cheetah_dir_sparse", frames=400, seed=1,
+                   task_kwargs={"episode_length": 20})  # fmt: skip
+
+
+def _posterior_by_steps(encoder, states, actions, rewards, steps: int) -> torch.Tensor:
+    """(mean, logvar) after `steps` transitions, the encoder stepped one transition at a time."""
+    h = torch.zeros(1, encoder.hidden)
+    mean = logvar = torch.zeros(1, encoder.latent_dim)
+    for t in range(steps):
+        h, mean, logvar = encoder.step(h, actions[None, t], rewards[None, t], states[None, t + 1])
+    return torch.cat([mean, logvar], -1)[0]
+
+
+def test_replayed_bonus_inputs_are_the_current_encoders_posteriors_of_stored_trajectories():
+    trainer = _replay_trainer()
+    trainer.collect()
+    trainer.learn(0)  # stores 8 trajectories and trains the VAE once: the collected latents are now stale
+    stored = trainer.state.trajectories.items
+    assert len(stored) == 8
+    encoder = trainer.policy.belief.encoder
+    replayed = trainer.replayed_inputs(16)  # 4 steps of each of 4 trajectories
+    assert replayed.next_features.shape == (16, 10) and replayed.replay is None
+    stale = 0
+    for row in range(16):
+        # Find the stored trajectory and step this row came from (continuous states are unique).
+        pair = (replayed.state[row].numpy(), replayed.next_state[row].numpy())
+        matches = [
+            (i, t) for i, (s, _, _, _) in enumerate(stored) for t in range(20)
+            if np.array_equal(s[t], pair[0]) and np.array_equal(s[t + 1], pair[1])
+        ]  # fmt: skip
+        assert len(matches) == 1
+        i, t = matches[0]
+        s, a, r = (torch.as_tensor(x, dtype=torch.float32) for x in stored[i][:3])
+        torch.testing.assert_close(replayed.action[row], a[t])
+        torch.testing.assert_close(replayed.reward[row], r[t, None])
+        with torch.no_grad():
+            torch.testing.assert_close(replayed.features[row], _posterior_by_steps(encoder, s, a, r[:, None], t))
+            want = _posterior_by_steps(encoder, s, a, r[:, None], t + 1)
+        torch.testing.assert_close(replayed.next_features[row], want)
+        # The rollout holds the features as collected, before the VAE update: replay recomputes them.
+        env_rows = (trainer.rollout.next_state == replayed.next_state[row]).all(-1).nonzero()
+        if len(env_rows):
+            step, env = env_rows[0].tolist()
+            stale += not torch.allclose(trainer.rollout.next_features[step, env], want)
+    assert stale > 0
+
+
+def test_rnd_trained_on_replay_steps_on_replayed_minibatches_only():
+    config = BonusConfig(train_on="replay", updates_per_iteration=3, batch_size=8)
+    belief = SimpleNamespace(feature_dim=2, trainable=True, replay_features=lambda trajectories: None)
+
+    def build() -> EnsembleRND:
+        torch.manual_seed(0)  # the networks' initial weights
+        return EnsembleRND.build(config, state_columns=[0], belief=belief, generator=torch.Generator(), name="r")
+
+    rnd, twin = build(), build()
+    g = torch.Generator().manual_seed(1)
+    replays = [_batch(torch.randn(8, 1, generator=g), torch.rand(8, 2, generator=g)) for _ in range(3)]
+    asked = []
+
+    def replay(n: int) -> BonusInput:
+        asked.append(n)
+        return replays[len(asked) - 1]
+
+    collected = _batch(100.0 + torch.randn(64, 1, generator=g), torch.rand(64, 2, generator=g))
+    rnd.update(dataclasses.replace(collected, replay=replay))
+    assert asked == [8, 8, 8] and rnd.buffer_len == 0  # the collected inputs are not stored
+    for minibatch in replays:  # the same three Adam steps by hand, on the replayed inputs
+        loss = twin.errors(twin._normalized(twin.selector(minibatch))).mean()
+        twin.optimizer.zero_grad()
+        loss.backward()
+        twin.optimizer.step()
+    for mine, theirs in zip(rnd.predictors.parameters(), twin.predictors.parameters(), strict=True):
+        torch.testing.assert_close(mine, theirs)
+    # Before the belief has stored a whole trajectory (replay answers None) it steps on the rollout's rows.
+    fresh = build()
+    before = [p.clone() for p in fresh.predictors.parameters()]
+    fresh.update(dataclasses.replace(collected, replay=lambda n: None))
+    assert fresh.buffer_len == 0
+    assert any(not torch.equal(b, p) for b, p in zip(before, fresh.predictors.parameters(), strict=True))
+
+
+def test_replay_needs_a_belief_that_recomputes_its_features():
+    with pytest.raises(ValueError, match="replay_features"):
+        agents.make("oracle_rh", **{"bonuses.0.train_on": "replay"}).check_task("cheetah_dir_sparse")
+    with pytest.raises(ValueError, match="train_on"):
+        BonusConfig(train_on="buffer")
