@@ -3,7 +3,8 @@
 # presets with bench/fig2.toml, the learning rate on the reference's 5e7-frame schedule
 # (turnaround/lr_horizon_5e7.toml), the reference code's PPO and exploration noise (turnaround/icml_ppo.toml)
 # and its actor-critic network (turnaround/reference_network.toml); every deviation is listed in
-# docs/results.md. The task-aware reference is one of the agents (it learns the dense task), so the grid
+# docs/results.md. `oracle_rh_rs` (bench/fig2_presets.py: the oracle with hyperx's bonuses, r_h + r_s) is a row
+# beyond the paper's (docs/turnaround.md, H19). The task-aware reference is one of the agents (it learns the dense task), so the grid
 # can run in parts — some agents or seeds per machine or session — merged with evaluation/merge.py:
 #   bash bench/reproduce_fig2_turnaround.sh [FRAMES] [OUT]                    # the whole grid
 #   AGENTS="hyperx" SEEDS="2" bash bench/reproduce_fig2_turnaround.sh 20000000 runs/part_hyperx_s2
@@ -14,7 +15,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 FRAMES=${1:-20000000}
 OUT=${2:-runs/fig2_turnaround}
-read -r -a AGENT_LIST <<< "${AGENTS:-oracle_rh hyperx varibad_rh oracle_rs oracle varibad task_aware}"
+read -r -a AGENT_LIST <<< "${AGENTS:-oracle_rh hyperx oracle_rh_rs varibad_rh oracle_rs oracle varibad task_aware}"
 read -r -a SEED_LIST <<< "${SEEDS:-0 1 2}"
 RESUME=()
 [ -f "$OUT/grid.json" ] && RESUME=(--resume)

@@ -563,7 +563,8 @@ def test_figure_2_config_is_valid():
         assert extra.bonuses[0].prior_scale == 5.0 and committed.bonuses[0].prior_scale == 10.0
         assert dataclasses.replace(extra, bonuses=committed.bonuses) == committed
     finally:
-        agents.PRESETS.pop("oracle_rh_prior5", None)
+        for name in ("oracle_rh_prior5", "oracle_rh_rs"):
+            agents.PRESETS.pop(name, None)
         sys.modules.pop("fig2_presets", None)
     assert set(presets) == {"oracle", "oracle_rs", "oracle_rh", "oracle_rh_prior5", "varibad", "varibad_rh", "hyperx"}
     assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 4
@@ -583,8 +584,9 @@ def test_figure_2_config_is_valid():
 
 
 def test_turnaround_grid_script_runs_every_preset_with_the_turnaround_settings():
-    """bench/reproduce_fig2_turnaround.sh: the six presets and the reference, each with the reference's PPO,
-    noise and network on the 5e7-frame learning-rate schedule over bench/fig2.toml (docs/turnaround.md)."""
+    """bench/reproduce_fig2_turnaround.sh: the six presets, `oracle_rh_rs` and the reference, each with the
+    reference's PPO, noise and network on the 5e7-frame learning-rate schedule over bench/fig2.toml
+    (docs/turnaround.md)."""
     import re
 
     from hyperstate.evaluation.run import build_grid, parse_args
@@ -598,15 +600,24 @@ def test_turnaround_grid_script_runs_every_preset_with_the_turnaround_settings()
     )
     try:
         names, overrides = build_grid(args)
+        # The extra row is the committed oracle_rh with hyperx's state bonus added, that bonus's settings as hyperx's.
+        extra = agents.make("oracle_rh_rs", **overrides["oracle_rh_rs"]).config
+        committed = agents.make("oracle_rh", **overrides["oracle_rh"]).config
+        hyperx = agents.make("hyperx", **overrides["hyperx"]).config
+        assert extra.bonuses == (committed.bonuses[0], hyperx.bonuses[1]) and hyperx.bonuses[1].input == "state"
+        assert dataclasses.replace(extra, bonuses=committed.bonuses) == committed
+        for name in names:
+            config = agents.make(name, **overrides[name]).config
+            assert config.ppo.network == "reference" and config.ppo.lr_anneal_frames == 50_000_000
+            assert config.ppo.num_envs == 16 and config.ppo.minibatch_unit == "transitions"  # icml_ppo over fig2's 32
+            assert config.ppo.entropy_coef == 1e-4 and config.ppo.sampled_action_cost == 0.05
     finally:
-        agents.PRESETS.pop("oracle_rh_prior5", None)
+        for name in ("oracle_rh_prior5", "oracle_rh_rs"):
+            agents.PRESETS.pop(name, None)
         sys.modules.pop("fig2_presets", None)
-    assert set(names) == {"oracle", "oracle_rs", "oracle_rh", "varibad", "varibad_rh", "hyperx", "task_aware"}
-    for name in names:
-        config = agents.make(name, **overrides[name]).config
-        assert config.ppo.network == "reference" and config.ppo.lr_anneal_frames == 50_000_000
-        assert config.ppo.num_envs == 16 and config.ppo.minibatch_unit == "transitions"  # icml_ppo over fig2's 32
-        assert config.ppo.entropy_coef == 1e-4 and config.ppo.sampled_action_cost == 0.05
+    assert set(names) == {
+        "oracle", "oracle_rs", "oracle_rh", "oracle_rh_rs", "varibad", "varibad_rh", "hyperx", "task_aware"
+    }  # fmt: skip
     assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 4  # fig2.toml's bonus settings stay
     assert "--eval-every $((FRAMES / 10))" in script and "--no-reference" in script
 

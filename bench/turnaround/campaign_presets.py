@@ -7,8 +7,8 @@ bench/turnaround/presets.py and `oracle_rh` still had prior 5 (the preset is the
 Use with  --import bench/fig2_presets.py bench/turnaround/campaign_presets.py  (fig2.toml has a table for the
           former's row)  --config bench/fig2.toml bench/turnaround/prior_20.toml
 
-`oracle_rh_rs`: `oracle_rh` (prior 10) plus `hyperx`'s state bonus r_s on x (H8: more experience far along
-the second direction, where its gait is trained). Config: bench/turnaround/oracle_rh_rs.toml.
+(`oracle_rh_rs`, `oracle_rh` plus `hyperx`'s state bonus (H8, H19), was defined here until 2026-12-02 and is
+now a row of bench/fig2_presets.py, its bonus settings a table of bench/fig2.toml.)
 
 The ablation of `oracle_rh_icml` (the reference code's oracle settings, which made the turn pay in 2 of 3
 seeds where the seed presets rarely did), one group of its settings at a time back to `oracle_rh` under
@@ -27,13 +27,12 @@ from __future__ import annotations
 import dataclasses
 
 from hyperstate import agents
-from hyperstate.agents.presets import HYPERSTATE_BONUS, STATE_BONUS
+from hyperstate.agents.presets import HYPERSTATE_BONUS
 
 _oracle_rh = agents.PRESETS["oracle_rh"]
 agents.PRESETS["oracle_rh_prior20"] = dataclasses.replace(
     _oracle_rh, bonuses=(dataclasses.replace(_oracle_rh.bonuses[0], prior_scale=20.0),)
 )
-agents.PRESETS["oracle_rh_rs"] = dataclasses.replace(_oracle_rh, bonuses=(*_oracle_rh.bonuses, STATE_BONUS))
 
 _oracle_rh_icml = agents.PRESETS["oracle_rh_icml"]
 agents.PRESETS["oracle_rh_icml_seed_bonus"] = dataclasses.replace(
