@@ -153,7 +153,9 @@ class EnsembleRND:
         self.predictors = nn.ModuleList(mlp([selector.dim, *config.hidden, config.out_dim], nn.ReLU) for _ in range(b))
         self.optimizer = torch.optim.Adam(self.predictors.parameters(), lr=config.lr)
         self.input_stats = RunningMeanStd((selector.dim,))
-        self.buffer = np.zeros((config.buffer_size, selector.dim), np.float32)
+        # Trained on replayed trajectories, the predictor keeps no inputs of its own.
+        kept = 0 if config.train_on == "replay" else config.buffer_size
+        self.buffer = np.zeros((kept, selector.dim), np.float32)
         self.buffer_len = 0
         self.buffer_pos = 0
 

@@ -4,8 +4,9 @@
 # (turnaround/lr_horizon_5e7.toml), the reference code's PPO and exploration noise (turnaround/icml_ppo.toml)
 # and its actor-critic network (turnaround/reference_network.toml); every deviation is listed in
 # docs/results.md. `oracle_rh_rs` (bench/fig2_presets.py: the oracle with hyperx's bonuses, r_h + r_s) is a row
-# beyond the paper's (docs/turnaround.md, H19). The task-aware reference is one of the agents (it learns the dense task), so the grid
-# can run in parts — some agents or seeds per machine or session — merged with evaluation/merge.py:
+# beyond the paper's (docs/turnaround.md, H19). The task-aware reference is one of the agents (it learns the
+# dense task), so the grid can run in parts — some agents or seeds per machine or session — merged with
+# evaluation/merge.py:
 #   bash bench/reproduce_fig2_turnaround.sh [FRAMES] [OUT]                    # the whole grid
 #   AGENTS="hyperx" SEEDS="2" bash bench/reproduce_fig2_turnaround.sh 20000000 runs/part_hyperx_s2
 #   .venv/bin/python evaluation/merge.py --into docs/results/fig2_turnaround runs/part_*

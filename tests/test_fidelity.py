@@ -215,9 +215,9 @@ def test_icml_presets_are_the_reference_configurations():
         )  # fmt: skip  (else the reference's PPO)
 
 
-def _replay_trainer(**overrides) -> Trainer:
+def _replay_trainer() -> Trainer:
     # BAMDP episodes of 20 steps: a 50-step rollout stores two whole trajectories per env.
-    config = {**TINY, "bonuses.0.train_on": "replay", "bonuses.0.batch_size": 16, **overrides}
+    config = {**TINY, "bonuses.0.train_on": "replay", "bonuses.0.batch_size": 16}
     return Trainer(agents.make("hyperx_icml", **config), "cheetah_dir_sparse", frames=400, seed=1,
                    task_kwargs={"episode_length": 20})  # fmt: skip
 
