@@ -600,9 +600,14 @@ def test_turnaround_grid_script_runs_every_preset_with_the_turnaround_settings()
     )
     try:
         names, overrides = build_grid(args)
-        # The extra row is the committed oracle_rh with hyperx's state bonus added, that bonus's settings as hyperx's.
+        # The extra row is the committed oracle_rh (its hyper-state bonus at the seed paper's weight 10) with
+        # hyperx's state bonus added, that bonus's settings as hyperx's.
         extra = agents.make("oracle_rh_rs", **overrides["oracle_rh_rs"]).config
-        committed = agents.make("oracle_rh", **overrides["oracle_rh"]).config
+        grid_oracle_rh = agents.make("oracle_rh", **overrides["oracle_rh"]).config
+        assert grid_oracle_rh.bonuses[0].weight == 20.0 and extra.bonuses[0].weight == 10.0
+        committed = dataclasses.replace(
+            grid_oracle_rh, bonuses=(dataclasses.replace(grid_oracle_rh.bonuses[0], weight=10.0),)
+        )
         hyperx = agents.make("hyperx", **overrides["hyperx"]).config
         assert extra.bonuses == (committed.bonuses[0], hyperx.bonuses[1]) and hyperx.bonuses[1].input == "state"
         assert dataclasses.replace(extra, bonuses=committed.bonuses) == committed
@@ -619,6 +624,7 @@ def test_turnaround_grid_script_runs_every_preset_with_the_turnaround_settings()
         "oracle", "oracle_rs", "oracle_rh", "oracle_rh_rs", "varibad", "varibad_rh", "hyperx", "task_aware"
     }  # fmt: skip
     assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 4  # fig2.toml's bonus settings stay
+    assert "bonuses.0.weight" not in overrides["hyperx"]  # H20 touches oracle_rh alone
     assert "--eval-every $((FRAMES / 10))" in script and "--no-reference" in script
 
 
