@@ -25,4 +25,5 @@ MUJOCO_GL=disable .venv/bin/python evaluation/run.py --import bench/fig2_presets
   --agents "${AGENT_LIST[@]}" --tasks cheetah_dir_sparse --seeds "${SEED_LIST[@]}" \
   --frames "$FRAMES" --eval-every $((FRAMES / 10)) --eval-tasks 20 --no-reference \
   --config bench/fig2.toml bench/turnaround/lr_horizon_5e7.toml bench/turnaround/icml_ppo.toml \
-  bench/turnaround/reference_network.toml bench/turnaround/hyperstate_weight_20.toml --workers "${WORKERS:-1}" --out "$OUT" "${RESUME[@]}"
+  bench/turnaround/reference_network.toml bench/turnaround/hyperstate_weight_20.toml \
+  --workers "${WORKERS:-1}" --out "$OUT" "${RESUME[@]}"
