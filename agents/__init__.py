@@ -16,8 +16,26 @@ from typing import Any
 from hyperstate.agents.agent import Agent, AgentState
 from hyperstate.agents.beliefs import Belief, Trajectories, Transition, list_beliefs, register_belief
 from hyperstate.agents.bonuses import Bonus, BonusInput, list_bonuses, register_bonus
-from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig, RecurrentConfig, VAEConfig, apply_overrides
-from hyperstate.agents.presets import PRESETS, check_components, get_preset, list_presets, register_preset
+from hyperstate.agents.config import (
+    RUNTIME_FIELDS,
+    AgentConfig,
+    BonusConfig,
+    PPOConfig,
+    RecurrentConfig,
+    VAEConfig,
+    agent_settings,
+    apply_overrides,
+    budget_dependence,
+    check_budget,
+)
+from hyperstate.agents.presets import (
+    GRID_PRESETS,
+    PRESETS,
+    check_components,
+    get_preset,
+    list_presets,
+    register_preset,
+)
 
 
 def make(preset: str, **overrides: Any) -> Agent:
@@ -28,7 +46,9 @@ def make(preset: str, **overrides: Any) -> Agent:
 
 
 __all__ = [
+    "GRID_PRESETS",
     "PRESETS",
+    "RUNTIME_FIELDS",
     "Agent",
     "AgentConfig",
     "AgentState",
@@ -41,7 +61,10 @@ __all__ = [
     "Trajectories",
     "Transition",
     "VAEConfig",
+    "agent_settings",
     "apply_overrides",
+    "budget_dependence",
+    "check_budget",
     "get_preset",
     "list_beliefs",
     "list_bonuses",

@@ -1,8 +1,9 @@
-"""Named agent presets: every curve of the paper's Figure 2, plus the baselines.
+"""Named agent presets: every curve of the paper's Figure 2, plus the baselines, in three families.
 
-`oracle_rh` etc. follow the paper's seed experiments: λ_h = λ_s = 10, each bonus and the extrinsic
-reward divided by its own rolling std (appendix C). `hyperx_icml` and `oracle_rh_icml` follow the reference
-code's ICML configurations instead (see ICML_PPO below).
+- `hyperx`, `oracle_rh`, ...: the validated agents, those behind the committed results (docs/agents.md lists
+  every difference from the other two families, with its evidence).
+- `<name>_paper`: the seed paper's literal settings (appendix C): λ_h = λ_s = 10, CleanRL's PPO and network.
+- `hyperx_icml`, `oracle_rh_icml`: the reference code's ICML configurations.
 """
 
 from __future__ import annotations
@@ -12,27 +13,44 @@ import dataclasses
 from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig, VAEConfig
 from hyperstate.agents.naming import unknown_name
 
-STATE_BONUS = BonusConfig(input="state")  # state_keys="task": the task's position keys
-# Prior scale 10 for every preset, the belief oracle's included. The reference code scales the oracle's RND
-# prior by 5 (kept in `oracle_rh_icml`); on cheetah_dir_sparse at 2e7 frames, 3 seeds each, prior 5 never
-# made the turn-around pay (online return 382 / 428 / 349) and prior 10 did in 2 of 3 (471 / 429 / 331),
-# turning earlier (docs/turnaround.md, run 1 and H2).
+# The seed paper's literal settings (appendix C) and this project's first defaults: CleanRL's PPO and network,
+# the learning rate annealed over the run's budget, RND predictors trained once per iteration on 10,000 inputs.
+PAPER_PPO = PPOConfig(
+    lr_anneal_frames=None,
+    value_loss="mse",
+    minibatch_unit="envs",
+    advantage_norm="minibatch",
+    sampled_action_cost=0.0,
+    network="cleanrl",
+)
+_PAPER_RND = {"buffer_size": 10_000, "updates_per_iteration": 1}
+
+# Bonuses of the validated presets. state_keys="task": the task's position keys (the cheetah's x-position).
 HYPERSTATE_BONUS = BonusConfig(input="hyperstate")
+STATE_BONUS = BonusConfig(input="state")
 
 # The reference code's ICML configurations for sparse cheetah-dir (config/sparse_cheetah_dir/cds_hyperx.py and
 # cds_belief_oracle.py): raw RND inputs, prior weights (not output) scaled, one predictor update per
 # iteration, bonuses annealed over the run; PPO with transition minibatches, whole-batch advantage
 # normalisation, the clipped Huber value loss, and the control cost charged on the sampled action.
-ICML_PPO = PPOConfig(
-    minibatch_unit="transitions", advantage_norm="batch", value_loss="clipped_huber", sampled_action_cost=0.05
+ICML_PPO = dataclasses.replace(
+    PAPER_PPO,
+    minibatch_unit="transitions",
+    advantage_norm="batch",
+    value_loss="clipped_huber",
+    sampled_action_cost=0.05,
 )
-_ICML_RND = dataclasses.replace(HYPERSTATE_BONUS, input_norm="none", prior_scaling="weights")
+_ICML_RND = BonusConfig(input="hyperstate", input_norm="none", prior_scaling="weights", **_PAPER_RND)
 
+# The validated agents: the defaults of PPOConfig and BonusConfig, which are the agents of the committed
+# turn-around grid (docs/results/fig2_turnaround, tested field for field against its records).
 PRESETS: dict[str, AgentConfig] = {
     "ppo": AgentConfig(belief="none"),
-    "rl2": AgentConfig(belief="recurrent", ppo=PPOConfig(lr=3e-4)),
+    # RL²'s GRU is trained through time by the policy's loss: minibatches of whole env sequences.
+    "rl2": AgentConfig(belief="recurrent", ppo=PPOConfig(lr=3e-4, minibatch_unit="envs")),
     "oracle": AgentConfig(belief="oracle"),
-    "oracle_rh": AgentConfig(belief="oracle", bonuses=(HYPERSTATE_BONUS,)),
+    # λ_h = 20: with the paper's 10 the oracle ran one way on cheetah_dir_sparse in 3 of 3 seeds (docs/agents.md).
+    "oracle_rh": AgentConfig(belief="oracle", bonuses=(dataclasses.replace(HYPERSTATE_BONUS, weight=20.0),)),
     "oracle_rs": AgentConfig(belief="oracle", bonuses=(STATE_BONUS,)),
     "oracle_ensemble_rh": AgentConfig(
         belief="oracle", bonuses=(dataclasses.replace(HYPERSTATE_BONUS, kind="ensemble_rnd", ensemble_size=5),)
@@ -41,6 +59,8 @@ PRESETS: dict[str, AgentConfig] = {
     "varibad_rh": AgentConfig(belief="varibad", bonuses=(HYPERSTATE_BONUS,)),
     "hyperx": AgentConfig(belief="varibad", bonuses=(HYPERSTATE_BONUS, STATE_BONUS)),
     "task_supervised": AgentConfig(belief="task_supervised"),
+    # Not a meta-learner: knows the task. evaluation/run.py trains it as the reference for regret.
+    "task_aware": AgentConfig(belief="task_aware"),
     # HyperX as in the reference code: hyper-state RND x0.1 + VAE-error bonus x1.0, no state bonus, and the
     # reference's VAE buffer of 10,000 trajectories (the other presets keep 1,000), from which the RND's
     # predictor draws its inputs, latents recomputed by the current encoder.
@@ -50,7 +70,7 @@ PRESETS: dict[str, AgentConfig] = {
         vae=VAEConfig(buffer_trajectories=10_000),
         bonuses=(
             dataclasses.replace(_ICML_RND, weight=0.1, train_on="replay"),
-            BonusConfig(kind="vae_error", input="belief", weight=1.0),
+            BonusConfig(kind="vae_error", input="belief", weight=1.0, **_PAPER_RND),
         ),
         anneal_bonus=True,
     ),
@@ -62,9 +82,24 @@ PRESETS: dict[str, AgentConfig] = {
         bonuses=(dataclasses.replace(_ICML_RND, weight=5.0, prior_scale=5.0, clip=10.0, buffer_size=10_000_000),),
         anneal_bonus=True,
     ),
-    # Not a meta-learner: knows the task. evaluation/run.py trains it as the reference for regret.
-    "task_aware": AgentConfig(belief="task_aware"),
 }
+
+# The presets of the committed turn-around grid, the agents the project's results are about.
+GRID_PRESETS = ("oracle", "oracle_rh", "oracle_rs", "varibad", "varibad_rh", "hyperx", "task_aware")
+
+
+def paper_variant(config: AgentConfig) -> AgentConfig:
+    """`config` with the seed paper's literal PPO, network and RND-training settings (and λ_h = 10)."""
+    bonuses = tuple(
+        dataclasses.replace(b, weight=10.0 if b.kind == "rnd" else b.weight, **_PAPER_RND) for b in config.bonuses
+    )
+    ppo = dataclasses.replace(PAPER_PPO, lr=config.ppo.lr, minibatch_unit=config.ppo.minibatch_unit)
+    if config.belief != "recurrent":
+        ppo = dataclasses.replace(ppo, minibatch_unit=PAPER_PPO.minibatch_unit)
+    return dataclasses.replace(config, ppo=ppo, bonuses=bonuses)
+
+
+PRESETS.update({f"{name}_paper": paper_variant(PRESETS[name]) for name in GRID_PRESETS})
 
 
 def register_preset(name: str, config: AgentConfig) -> AgentConfig:

@@ -218,10 +218,11 @@ class Trainer:
         if frames <= 0:
             raise ValueError(f"frames must be positive, got {frames}")
         cfg, p = policy.config, policy.config.ppo
+        config_lib.check_budget(cfg, frames)
         torch.set_num_threads(cfg.torch_threads)
-        env = suite.batch(
-            task, p.num_envs, seed=seed, num_threads=cfg.physics_threads, privileged=True, **(task_kwargs or {})
-        )
+        # A runtime choice: parallel cells of a grid share the cores through $HYPERSTATE_PHYSICS_THREADS.
+        threads = cfg.physics_threads or int(os.environ.get("HYPERSTATE_PHYSICS_THREADS", "0"))
+        env = suite.batch(task, p.num_envs, seed=seed, num_threads=threads, privileged=True, **(task_kwargs or {}))
         policy._build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(task))
         self.policy = policy
         self.iterations = math.ceil(frames / (p.num_envs * p.rollout_length))
@@ -339,9 +340,21 @@ class Trainer:
     def restore(self, path: Path) -> None:
         saved = serialization.load(path, kind="checkpoint")
         # The config as this code reads it: a checkpoint from before a config field existed holds its default.
-        config = config_lib.to_dict(config_lib.from_dict(config_lib.AgentConfig, saved["config"]))
-        if (config, saved["task"], saved["seed"], saved["frames"]) != self.state.identity():
+        saved_config = config_lib.to_dict(config_lib.from_dict(config_lib.AgentConfig, saved["config"]))
+        config, task, seed, frames = self.state.identity()
+        if (config_lib.agent_settings(saved_config), saved["task"], saved["seed"]) != (
+            config_lib.agent_settings(config),
+            task,
+            seed,
+        ) or saved["frames"] > frames:
             raise ValueError(f"checkpoint {path} was written by a different run (config, task, seed or frames)")
+        if saved["frames"] < frames:  # extending a finished or shorter run: only if its schedules allow it
+            reason = config_lib.budget_dependence(self.policy.config)
+            if reason is not None:
+                raise ValueError(
+                    f"checkpoint {path} was trained for a budget of {saved['frames']:,} frames; continuing it to "
+                    f"{frames:,} would change its schedule ({reason})"
+                )
         self.state.load_state_dict(saved)
 
     # Collection ----------------------------------------------------------------------------------------

@@ -61,7 +61,8 @@ def main() -> None:
     result["seconds_per_phase"] = {k: round(v, 2) for k, v in seconds.items()}
     result["share_per_phase"] = {k: round(v / total, 3) for k, v in seconds.items()}
     result["share_unaccounted"] = round(1 - sum(seconds.values()) / total, 3)
-    # Physics as the loop runs it: settled random starts and learned gaits (bench/physics_state_probe.py).
+    # Physics as the loop runs it: settled random starts and learned gaits
+    # (research/performance/physics_state_probe.py).
     result["loop_physics_frames_per_second"] = round(frames / seconds["physics"])
     out = args.out or Path(f"bench/results/throughput_{args.preset}.json")
     out.parent.mkdir(parents=True, exist_ok=True)

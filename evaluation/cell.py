@@ -14,6 +14,7 @@ evaluation/upgrade.py); an incomplete one resumes from its checkpoint.
 from __future__ import annotations
 
 import dataclasses
+import io
 import json
 import os
 import platform
@@ -87,6 +88,13 @@ def write_bytes_atomic(path: Path, data: bytes) -> None:
         raise
 
 
+def save_array_atomic(path: Path, array: np.ndarray) -> None:
+    """`array` as a .npy file, written atomically (`write_bytes_atomic`)."""
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    write_bytes_atomic(path, buffer.getvalue())
+
+
 def write_json_atomic(path: Path, data: Any) -> None:
     """`data` as JSON, written atomically (`write_bytes_atomic`)."""
     write_bytes_atomic(path, json.dumps(data, indent=1, default=_json_default).encode())
@@ -108,7 +116,7 @@ def _json_default(value: Any) -> Any:
 
 
 def versions() -> dict:
-    """Package versions and the git commit of the code that produced a result."""
+    """Package versions, the git commit of the code and the processor that produced a result."""
     out = {"python": platform.python_version()}
     for package in ("hyperstate", "torch", "mujoco", "dm-control", "numpy"):
         try:
@@ -125,7 +133,26 @@ def versions() -> dict:
         )
     except (OSError, subprocess.SubprocessError):
         out["git_commit"] = None
+    out["cpu"] = cpu_description()
     return out
+
+
+def cpu_description() -> str:
+    """The processor and its widest vector unit: a run's floats, and so its learning curve, depend on them."""
+    model, flags = platform.processor() or platform.machine(), set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name" and value.strip():
+                model = value.strip()
+            elif key.strip() == "flags":
+                flags = set(value.split())
+            if flags and model:
+                break
+    except OSError:
+        pass
+    vector = next((f for f in ("avx512f", "avx2", "avx", "neon", "asimd") if f in flags), None)
+    return f"{model} ({vector})" if vector else model
 
 
 def read_import_sources(names: tuple[str, ...] | list[str]) -> tuple[tuple[str, str], ...]:
@@ -215,7 +242,7 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
     record_path = directory / grid.RECORD
     if spec.resume and record_path.exists():
         record = json.loads(record_path.read_text())
-        if record.get("complete"):
+        if record.get("complete") and record["frames"] >= spec.frames:
             # Written by older code? Brought up to the current metrics from what the cell saved.
             if upgrade_record(record, directory, spec.episodes_per_task):
                 write_json_atomic(record_path, record)
@@ -336,6 +363,10 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
         add_to_point(since_point, values)
         with point_log.open("a") as f:
             f.write(json.dumps({"frames": frames, "values": values}) + "\n")
+        if coverage is not None:
+            # Every iteration: a resume replays only the iterations after its checkpoint, which may fall
+            # between points, so the visits of those before it must already be on disk.
+            save_array_atomic(coverage_path, coverage.visited)
         if not due(frames):
             return False
         point_written[0] = True
@@ -344,8 +375,6 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
         snapshot = grid.snapshot_path(Path(spec.out), spec.cell_id, frames)
         snapshot.parent.mkdir(exist_ok=True)
         agent.save(snapshot)
-        if coverage is not None:
-            np.save(coverage_path, coverage.visited)
         write_json_atomic(record_path, record)
         return True  # checkpoint now: a resumed run rejoins the curve here
 

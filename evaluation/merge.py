@@ -24,7 +24,8 @@ import shutil
 import sys
 from pathlib import Path
 
-from hyperstate.evaluation import grid
+from hyperstate.agents.config import RUNTIME_FIELDS, AgentConfig, agent_settings, from_dict
+from hyperstate.evaluation import cli, grid
 from hyperstate.evaluation.cell import load_records, write_json_atomic, write_results
 from hyperstate.evaluation.report import text_table, write_figures, write_summary
 
@@ -47,9 +48,18 @@ def _flatten(config: dict, prefix: str = "") -> dict:
     return out
 
 
+def comparable(config: dict) -> dict:
+    """A record's agent config as this code reads it (fields added since it ran at the values that reproduce
+    the code it ran), without the runtime fields, which results do not depend on."""
+    try:
+        return agent_settings(from_dict(AgentConfig, config))
+    except (ValueError, TypeError, KeyError):  # an agent of your own: its config as recorded
+        return {k: v for k, v in config.items() if k not in RUNTIME_FIELDS}
+
+
 def config_differences(a: dict, b: dict) -> list[str]:
-    """The dotted fields in which two agent configs differ, as 'field: a != b'."""
-    fa, fb = _flatten(a), _flatten(b)
+    """The dotted fields in which two agents' settings differ, as 'field: a != b'."""
+    fa, fb = _flatten(comparable(a)), _flatten(comparable(b))
     return [f"{k}: {fa.get(k)!r} != {fb.get(k)!r}" for k in sorted(set(fa) | set(fb)) if fa.get(k) != fb.get(k)]
 
 
@@ -145,8 +155,10 @@ def merge(
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="evaluation/merge.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    p = cli.OneLineParser(
+        prog=cli.program_name("evaluation/merge.py"),
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("parts", nargs="+", type=Path, metavar="PART", help="evaluation/run.py --out folders")
     p.add_argument("--into", type=Path, required=True, help="the merged grid (created, or added to)")
@@ -156,7 +168,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         notes, rows = merge(args.into, args.parts, args.with_agent, args.replace)
     except MergeError as e:
-        print(f"evaluation/merge.py: error: {e}", file=sys.stderr)
+        print(f"{cli.program_name('evaluation/merge.py')}: error: {e}", file=sys.stderr)
         return 2
     print(*notes, sep="\n")
     print()

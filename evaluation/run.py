@@ -20,13 +20,15 @@ import subprocess
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 # Nothing here renders: name no OpenGL backend and dm_control would try GLFW and warn about DISPLAY.
 os.environ.setdefault("MUJOCO_GL", "disable")
 
 from hyperstate import agents, suite
+from hyperstate.agents.naming import unknown_name
+from hyperstate.evaluation import cli, protocol
 from hyperstate.evaluation import grid as grid_layout
-from hyperstate.evaluation import protocol
 from hyperstate.evaluation.cell import (
     CellSpec,
     import_modules,
@@ -45,9 +47,33 @@ class UsageError(Exception):
     """A bad command line: reported in one line, exit code 2, nothing written."""
 
 
+def program_name() -> str:
+    """`hyperstate-run` or `evaluation/run.py`, as the user typed it."""
+    return cli.program_name("evaluation/run.py")
+
+
+_SUFFIXES = {"k": 10**3, "m": 10**6, "g": 10**9}
+
+
+def frame_count(text: str) -> int:
+    """A whole number of frames: `20000000`, `2e7`, `20M`, `1.5M`, `500k` (argparse type)."""
+    value = text.strip().replace("_", "")
+    scale = _SUFFIXES.get(value[-1:].lower(), 1)
+    number = value[:-1] if scale > 1 else value
+    try:
+        if scale == 1 and number.lstrip("+-").isdigit():
+            return int(number)
+        amount = float(number) * scale
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number of frames (e.g. 20000000, 2e7, 20M)") from None
+    if not amount.is_integer() or abs(amount) > 1e15:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of frames")
+    return int(amount)
+
+
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
-    p = argparse.ArgumentParser(
-        prog="evaluation/run.py", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    p = cli.OneLineParser(
+        prog=program_name(), description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     p.add_argument(
         "--agents",
@@ -58,11 +84,17 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     p.add_argument("--tasks", nargs="+", required=True, metavar="T", help=f"tasks: {', '.join(suite.TASKS)}")
     p.add_argument("--seeds", nargs="+", type=int, default=[0], metavar="S", help="training seeds (default: 0)")
-    p.add_argument("--frames", type=int, required=True, help="environment steps of training per cell")
+    p.add_argument(
+        "--frames",
+        type=frame_count,
+        required=True,
+        help="environment steps of training per cell (20000000, 2e7 or 20M); with --resume, a larger budget "
+        "than the grid's extends every cell to it",
+    )
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument(
         "--eval-every",
-        type=int,
+        type=frame_count,
         default=None,
         metavar="F",
         help="frames between evaluation points (default: frames / 10, rounded to iterations)",
@@ -139,6 +171,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="parallel cells (local executor; default: 1 per 2 cores, at least 1)",
     )
     p.add_argument(
+        "--physics-threads",
+        type=int,
+        default=None,
+        metavar="N",
+        help="physics threads per cell (default: the cores shared out among the workers); results do not depend on it",
+    )
+    p.add_argument(
         "--ray-address", default=None, help="Ray cluster address (default: $RAY_ADDRESS, else a local instance)"
     )
     p.add_argument(
@@ -188,7 +227,9 @@ def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
         raise UsageError(f"--frames must be positive, got {args.frames}")
     for name in args.tasks:
         if name not in suite.TASKS:
-            raise UsageError(f"unknown task {name!r}; tasks: {', '.join(suite.TASKS)}")
+            raise UsageError(str(unknown_name("task", name, suite.TASKS, "tasks")))
+    if args.physics_threads is not None and args.physics_threads < 1:
+        raise UsageError(f"--physics-threads must be positive, got {args.physics_threads}")
     for name in args.agents:
         try:
             protocol.check_name(name)
@@ -213,9 +254,14 @@ def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
     for name in names:
         merged = {**config.get("all", {}), **config.get(name, {})}
         try:
-            protocol.make_agent(name, **merged)
+            agent = protocol.make_agent(name, **merged)
         except (ValueError, TypeError) as e:
             raise UsageError(f"--config for {name}: {e}") from None
+        if isinstance(getattr(agent, "config", None), agents.AgentConfig):
+            try:
+                agents.check_budget(agent.config, args.frames)
+            except ValueError as e:
+                raise UsageError(f"{name}: {e}") from None
         overrides[name] = merged
     return names, overrides
 
@@ -241,21 +287,60 @@ def prepare_out(args: argparse.Namespace, grid: dict) -> None:
         shutil.rmtree(out)
     has_results = grid_file.exists() or (out / grid_layout.RESULTS).exists() or (out / grid_layout.CELLS).exists()
     if has_results:
-        previous = json.loads(grid_file.read_text()) if grid_file.exists() else None
+        previous = read_json_file(grid_file) if grid_file.exists() else None
         if not args.resume:
             what = "this grid" if previous == grid else "a different grid"
             raise UsageError(
                 f"--out {out} holds results of {what}; pass --resume to continue it or --force to overwrite"
             )
-        if previous != grid:
+        if previous is not None and _extends(previous, grid, args):
+            grid["eval_every"] = previous["eval_every"]
+            _check_extension(grid)
+        elif previous != grid:
             raise UsageError(
-                f"--out {out} holds results of a different grid; --resume needs the same arguments "
-                "(or use --force or another --out)"
+                f"--out {out} holds results of a different grid; --resume needs the same arguments, or a larger "
+                "--frames to extend it (or use --force or another --out)"
             )
+        for record in sorted((out / grid_layout.CELLS).glob(f"*/{grid_layout.RECORD}")):
+            read_json_file(record)
     if args.storage is not None:
         _prepare_storage(args)
     out.mkdir(parents=True, exist_ok=True)
     write_json_atomic(grid_file, grid)
+
+
+def read_json_file(path: Path) -> Any:
+    """The JSON in `path`; UsageError naming the file if it is not whole (a partial copy, say)."""
+    try:
+        return json.loads(path.read_text())
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise UsageError(
+            f"{path} is unreadable ({type(e).__name__}: {e}); this program writes it whole, so it is damaged or "
+            f"a partial copy: restore it, or delete {path.parent} to run that part again"
+        ) from None
+
+
+def _extends(previous: dict, grid: dict, args: argparse.Namespace) -> bool:
+    """Whether `grid` is `previous` with a larger budget (and the same evaluation points)."""
+    if grid["frames"] <= previous.get("frames", 0):
+        return False
+    if args.eval_every is not None and args.eval_every != previous.get("eval_every"):
+        return False
+    same = {k: v for k, v in grid.items() if k not in ("frames", "eval_every")}
+    return same == {k: v for k, v in previous.items() if k not in ("frames", "eval_every")}
+
+
+def _check_extension(grid: dict) -> None:
+    """Refuses to extend a grid whose agents' training would differ from a run started with the new budget."""
+    for name in grid["agents"]:
+        config = getattr(protocol.make_agent(name, **grid["overrides"][name]), "config", None)
+        reason = (
+            agents.budget_dependence(config)
+            if isinstance(config, agents.AgentConfig)
+            else ("its schedules cannot be checked (not an agents.AgentConfig)")
+        )
+        if reason is not None:
+            raise UsageError(f"cannot extend {name} to {grid['frames']:,} frames: {reason}")
 
 
 def _prepare_storage(args: argparse.Namespace) -> None:
@@ -323,7 +408,7 @@ def write_diagnostics(out: Path, records: list[dict]) -> None:
         try:
             cell_diagnostics(out, cell)
         except Exception as e:  # noqa: BLE001  (a figure must not cost the results)
-            print(f"evaluation/run.py: bonus landscape of {cell} failed: {type(e).__name__}: {e}", file=sys.stderr)
+            print(f"{program_name()}: bonus landscape of {cell} failed: {type(e).__name__}: {e}", file=sys.stderr)
 
 
 def render_videos(args: argparse.Namespace) -> None:
@@ -337,7 +422,7 @@ def render_videos(args: argparse.Namespace) -> None:
     result = subprocess.run(command, env=env, cwd=Path(__file__).resolve().parents[1])
     if result.returncode != 0:
         print(
-            f"evaluation/run.py: rendering the videos failed (exit {result.returncode}); the results stand",
+            f"{program_name()}: rendering the videos failed (exit {result.returncode}); the results stand",
             file=sys.stderr,
         )
 
@@ -359,16 +444,19 @@ def main(argv: list[str] | None = None) -> int:
         }
         prepare_out(args, grid)
     except UsageError as e:
-        print(f"evaluation/run.py: error: {e}", file=sys.stderr)
+        print(f"{program_name()}: error: {e}", file=sys.stderr)
         return 2
     skipped = incompatible_cells(args, names, overrides)
     for (name, task), reason in skipped.items():
-        print(f"evaluation/run.py: skipping {name} on {task}: {reason}", file=sys.stderr)
+        print(f"{program_name()}: skipping {name} on {task}: {reason}", file=sys.stderr)
     if len(skipped) == len(names) * len(args.tasks):
-        print("evaluation/run.py: error: no agent of the grid can run on its tasks", file=sys.stderr)
+        print(f"{program_name()}: error: no agent of the grid can run on its tasks", file=sys.stderr)
         return 2
     workers = args.workers or max(1, (os.cpu_count() or 1) // 2)
-    cells_per_worker_threads = max(1, (os.cpu_count() or 1) // workers)
+    # Parallel local cells share the cores; --physics-threads overrides the share.
+    physics_threads = args.physics_threads or 0
+    if not physics_threads and args.executor == "local" and workers > 1:
+        physics_threads = max(1, (os.cpu_count() or 1) // workers)
     specs = []
     cells = [(n, t, s) for t in args.tasks for n in names for s in args.seeds if (n, t) not in skipped]
     for i, (name, task, seed) in enumerate(cells):
@@ -388,7 +476,7 @@ def main(argv: list[str] | None = None) -> int:
                 i + 1,
                 tuple(args.imports),
                 # Parallel cells share the cores: each cell's physics gets its share.
-                physics_threads=cells_per_worker_threads if args.executor == "local" and workers > 1 else 0,
+                physics_threads=physics_threads,
                 storage=str(args.storage or args.out),
                 # Ray cells may run where the user's files are not: they take the driver's copies along.
                 import_sources=read_import_sources(args.imports) if args.executor == "ray" else (),
@@ -407,7 +495,7 @@ def main(argv: list[str] | None = None) -> int:
         else:
             failures = run_local(specs, workers, not args.no_progress, args.out)
     except UsageError as e:
-        print(f"evaluation/run.py: error: {e}", file=sys.stderr)
+        print(f"{program_name()}: error: {e}", file=sys.stderr)
         return 2
     write_results(args.out)
     records = load_records(args.out)
@@ -421,7 +509,7 @@ def main(argv: list[str] | None = None) -> int:
     print(text_table(rows))
     print(f"\n{len(records)} cells in {time.perf_counter() - started:.0f} s; results in {args.out}/")
     if failures:
-        print(f"evaluation/run.py: {len(failures)} cell(s) failed:", *failures, sep="\n  ", file=sys.stderr)
+        print(f"{program_name()}: {len(failures)} cell(s) failed:", *failures, sep="\n  ", file=sys.stderr)
         return 1
     return 0
 

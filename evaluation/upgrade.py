@@ -48,6 +48,11 @@ def upgrade_record(record: dict, directory: Path, episodes_per_task: int | None 
     reference = record["agent"] == REFERENCE_AGENT
     needs_agent = "stochastic" not in final or (reference and "certainty_equivalent" not in final)
     if agent_path.exists() and needs_agent:
+        import torch
+
+        # The thread count the cell deployed with after training: float sums depend on it, and a sampled
+        # deployment amplifies a last-digit difference into another trajectory.
+        torch.set_num_threads(int(record.get("config", {}).get("torch_threads", 1)))
         agent = protocol.load_agent(record["agent"], agent_path)
         tasks = evaluation_tasks(record["task"], len(final["online_return_per_task"]))
         if "stochastic" not in final:

@@ -13,6 +13,7 @@ return estimator. A task that declares none of these gets none of them; the harn
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import inspect
 from collections.abc import Callable
 from typing import Any
@@ -211,7 +212,9 @@ def _lookup(name: str) -> TaskEntry:
     try:
         return _REGISTRY[name]
     except KeyError:
-        raise ValueError(f"unknown task {name!r}; registered tasks: {', '.join(TASKS)}") from None
+        close = difflib.get_close_matches(str(name), TASKS, n=3)
+        hint = f" (did you mean {', '.join(close)}?)" if close else ""
+        raise ValueError(f"unknown task {name!r}{hint}; registered tasks: {', '.join(TASKS)}") from None
 
 
 def _check_kwargs(name: str, factory: Callable[..., Any], kwargs: dict[str, Any]) -> None:

@@ -265,10 +265,10 @@ def test_vae_error_bonus_is_the_reward_decoders_squared_error():
 
 def test_feature_embed_gain_makes_the_belief_embedding_orthogonal_times_the_gain():
     torch.manual_seed(0)
-    default = ActorCritic(7, 2, 3, PPOConfig())
+    default = ActorCritic(7, 2, 3, PPOConfig(network="cleanrl"))
     after_default = torch.randn(3)
     torch.manual_seed(0)
-    scaled = ActorCritic(7, 2, 3, dataclasses.replace(PPOConfig(), feature_embed_gain=3.0))
+    scaled = ActorCritic(7, 2, 3, PPOConfig(network="cleanrl", feature_embed_gain=3.0))
     # Only the belief-features embedding differs: every other layer, and what is drawn after, is the same.
     assert torch.equal(torch.randn(3), after_default)
     for (name, a), (_, b) in zip(default.named_parameters(), scaled.named_parameters(), strict=True):
@@ -313,7 +313,7 @@ def test_reference_network_is_the_reference_codes_actor_critic():
     # policy is near zero everywhere (mean head x0.01).
     state = torch.randn(256, 7)
     forward, backward = (model.mean_std(state, torch.tensor([b] * 256))[0] for b in ([0.0, 1.0], [1.0, 0.0]))
-    cleanrl = ActorCritic(7, 2, 3, PPOConfig())
+    cleanrl = ActorCritic(7, 2, 3, PPOConfig(network="cleanrl"))
     cleanrl_mean = cleanrl.mean_std(state, torch.tensor([[0.0, 1.0]] * 256))[0]
     assert forward.abs().mean() > 0.1 and (forward - backward).abs().mean() > 0.02
     assert cleanrl_mean.abs().mean() < 0.02

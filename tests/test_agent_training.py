@@ -157,13 +157,22 @@ def test_resume_from_checkpoint_equals_uninterrupted_run(preset, overrides, tmp_
 
 def test_resume_refuses_a_checkpoint_from_another_run(tmp_path):
     run = {"seed": 0, "task_kwargs": TINY_TASK, "progress": False, "checkpoint_dir": tmp_path}
-    agents.make("oracle", **TINY).train("cheetah_dir_sparse", frames=200, **run)
+    agents.make("oracle", **TINY).train("cheetah_dir_sparse", frames=400, **run)
     other = agents.make("oracle", **{**TINY, "ppo.lr": 1e-3})
     with pytest.raises(ValueError, match="different run"):
-        other.train("cheetah_dir_sparse", frames=200, **run, resume=True)
-    longer = agents.make("oracle", **TINY)  # a different budget changes the LR schedule: not the same run
+        other.train("cheetah_dir_sparse", frames=400, **run, resume=True)
+    shorter = agents.make("oracle", **TINY)
     with pytest.raises(ValueError, match="different run"):
-        longer.train("cheetah_dir_sparse", frames=400, **run, resume=True)
+        shorter.train("cheetah_dir_sparse", frames=200, **run, resume=True)
+    # A longer budget continues the run where its schedules do not follow the budget (the presets'), and is
+    # refused where they do: the learning rate would have decayed differently.
+    paper_run = {**run, "checkpoint_dir": tmp_path / "paper"}
+    agents.make("oracle_paper", **TINY).train("cheetah_dir_sparse", frames=200, **paper_run)
+    with pytest.raises(ValueError, match=r"would change its schedule \(ppo.lr_anneal_frames is null"):
+        agents.make("oracle_paper", **TINY).train("cheetah_dir_sparse", frames=400, **paper_run, resume=True)
+    longer = agents.make("oracle", **TINY)
+    log = longer.train("cheetah_dir_sparse", frames=600, **run, resume=True)
+    assert [entry["frames"] for entry in log] == [200, 400, 600]
 
 
 def test_clear_errors():

@@ -12,10 +12,19 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 
+# The user's benchmarks (bench/) and the research campaign's probes (research/), tested alike.
+SCRIPT_FOLDERS = (ROOT / "bench", ROOT / "research" / "turnaround", ROOT / "research" / "performance")
+
+
+def script_path(name: str) -> Path:
+    (path,) = [folder / name for folder in SCRIPT_FOLDERS if (folder / name).exists()]
+    return path
+
+
 def bench(script: str, *args, out: Path) -> dict:
     env = {**os.environ, "MUJOCO_GL": "disable"}
     subprocess.run(
-        [sys.executable, str(ROOT / "bench" / script), *map(str, args), "--out", str(out)],
+        [sys.executable, str(script_path(script)), *map(str, args), "--out", str(out)],
         check=True, capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
     )  # fmt: skip
     return json.loads(out.read_text())
@@ -99,7 +108,7 @@ def test_turnaround_summary_plots_every_run(tmp_path):
 def _load_bench(name: str):
     import importlib.util
 
-    spec = importlib.util.spec_from_file_location(name, ROOT / "bench" / f"{name}.py")
+    spec = importlib.util.spec_from_file_location(name, script_path(f"{name}.py"))
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
@@ -146,7 +155,7 @@ def test_snapshot_turns_deploys_each_kept_agent(tmp_path):
         agent.save(tmp_path / "snapshots" / f"agent_{frames:09d}.pt")
     env = {**os.environ, "MUJOCO_GL": "disable"}
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "snapshot_turns.py"), str(tmp_path), "--every", "1",
+        [sys.executable, str(script_path("snapshot_turns.py")), str(tmp_path), "--every", "1",
          "--json", str(tmp_path / "turns.json")],
         check=True, capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
     )  # fmt: skip
@@ -249,7 +258,7 @@ def test_gait_probe_runs_on_a_varibad_agent(tmp_path):
     agent.save(tmp_path / "agent.pt")
     env = {**os.environ, "MUJOCO_GL": "disable"}
     proc = subprocess.run(
-        [sys.executable, str(ROOT / "bench" / "gait_probe.py"), str(tmp_path / "agent.pt"), "--json",
+        [sys.executable, str(script_path("gait_probe.py")), str(tmp_path / "agent.pt"), "--json",
          str(tmp_path / "gait.json")],
         capture_output=True, text=True, env=env, cwd=ROOT, timeout=600,
     )  # fmt: skip

@@ -104,9 +104,9 @@ def test_user_bonus_example_registers_and_benchmarks(tmp_path):
         assert bonus.counts.sum() == 512 and bonus.counts[bonus.bins // 2 - 3 : bonus.bins // 2 + 3].sum() > 0
         with pytest.raises(ValueError, match="bin_width > 0 only"):
             agents.make("oracle_count", **{"bonuses.0.params.bin_widht": 1.0}).check_task("cheetah_dir_sparse")
-        # The bench's told-the-task probe loads such a cell with the same --import, and only with it.
+        # The research told-the-task probe loads such a cell with the same --import, and only with it.
         cell = tmp_path / "out" / "cells" / "oracle_count__cheetah_dir_sparse__s0"
-        probe = [sys.executable, str(ROOT / "bench" / "gait_probe.py"), str(cell)]
+        probe = [sys.executable, str(ROOT / "research" / "turnaround" / "gait_probe.py"), str(cell)]
         env = {**os.environ, "MUJOCO_GL": "disable"}
         told = subprocess.run([*probe, "--import", str(module)], capture_output=True, text=True, env=env, cwd=ROOT)
         assert told.returncode == 0, told.stderr

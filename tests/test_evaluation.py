@@ -1,7 +1,6 @@
 """evaluation/run.py: the results contract, metrics, errors, crash + resume, Ray."""
 
 import csv
-import dataclasses
 import json
 import os
 import signal
@@ -124,7 +123,7 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
         assert final["online_return"] == pytest.approx(np.mean(final["online_return_per_task"]))
         assert final["online_return"] == pytest.approx(r["curve"][-1]["online_return"])
         assert {"left_zone", "first_exit_step", "correct_direction", "stuck", "distance_correct"} <= set(final)
-        assert r["versions"]["mujoco"] == "3.17.0"
+        assert r["versions"]["mujoco"] == "3.17.0" and r["versions"]["cpu"]  # floats depend on the CPU
         assert {"probe_kl", "probe_kl_after", "informed_fraction"} <= set(final)
         assert all(0.0 < p["coverage"] <= 1.0 for p in r["curve"])
         # The task-aware reference learns the dense counterpart; every agent is deployed on the task.
@@ -530,134 +529,88 @@ def test_certainty_equivalent_shows_the_belief_mode_and_pays_the_wrong_guess():
     assert d.rewards[:, 1].sum() < truthful.rewards[:, 1].sum()  # the detour is paid
 
 
-def test_figure_2_config_is_valid():
-    """bench/reproduce_fig2.sh's config maps onto the presets (a typo would only show hours later)."""
-    from hyperstate.evaluation.run import build_grid, parse_args
-
-    script = (ROOT / "bench" / "reproduce_fig2.sh").read_text()
-    agents_line = next(line for line in script.splitlines() if "--agents" in line)
-    presets = agents_line.split("--agents")[1].split("\\")[0].split()
-    import_line = next(line for line in script.splitlines() if "--import" in line)
-    (extra_presets,) = import_line.split("--import")[1].split("\\")[0].split()
-    args = parse_args(
-        [
-            "--import",
-            str(ROOT / extra_presets),
-            "--agents",
-            *presets,
-            "--tasks",
-            "cheetah_dir_sparse",
-            "--frames",
-            "1000",
-            "--out",
-            "unused",
-            "--config",
-            str(ROOT / "bench" / "fig2.toml"),
-        ]
-    )
-    try:
-        names, overrides = build_grid(args)
-        # The extra row is the committed preset with only its prior scale changed (to the reference's 5).
-        extra = agents.make("oracle_rh_prior5", **overrides["oracle_rh_prior5"]).config
-        committed = agents.make("oracle_rh", **overrides["oracle_rh"]).config
-        assert extra.bonuses[0].prior_scale == 5.0 and committed.bonuses[0].prior_scale == 10.0
-        assert dataclasses.replace(extra, bonuses=committed.bonuses) == committed
-    finally:
-        for name in ("oracle_rh_prior5", "oracle_rh_rs"):
-            agents.PRESETS.pop(name, None)
-        sys.modules.pop("fig2_presets", None)
-    assert set(presets) == {"oracle", "oracle_rs", "oracle_rh", "oracle_rh_prior5", "varibad", "varibad_rh", "hyperx"}
-    assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 4
-    assert overrides["oracle_rh_prior5"]["bonuses.0.updates_per_iteration"] == 4
-    assert all(o["ppo.entropy_coef"] == 0.01 for o in overrides.values())
-    assert all(o["physics_threads"] == 1 for o in overrides.values())
-    # The reference-code rows (bench/reproduce_fig2_icml.sh) run the `_icml` presets unchanged.
-    icml = (ROOT / "bench" / "reproduce_fig2_icml.sh").read_text()
-    icml_presets = next(line for line in icml.splitlines() if "--agents" in line).split("--agents")[1].split("--")[0]
-    args = parse_args(
-        ["--agents", *icml_presets.split(), "--tasks", "cheetah_dir_sparse", "--frames", "1000", "--out", "unused"]
-        + ["--config", str(ROOT / "bench" / "fig2_icml.toml"), "--no-reference"]
-    )
-    names, overrides = build_grid(args)
-    assert names == ["hyperx_icml", "oracle_rh_icml"]
-    assert all(o == {"physics_threads": 1} for o in overrides.values())
-
-
-def test_turnaround_grid_script_runs_every_preset_with_the_turnaround_settings():
-    """bench/reproduce_fig2_turnaround.sh: the six presets, `oracle_rh_rs` and the reference, each with the
-    reference's PPO, noise and network on the 5e7-frame learning-rate schedule over bench/fig2.toml
-    (docs/turnaround.md)."""
+def _script_agents(script: str) -> list[str]:
     import re
 
+    text = (ROOT / "scripts" / script).read_text()
+    listed = re.search(r"AGENTS:-([^}]*)}", text)
+    return listed.group(1).split() if listed else text.split("--agents")[1].split("--tasks")[0].split()
+
+
+@pytest.mark.parametrize(
+    "script,folder", [("reproduce_fig2_turnaround.sh", "fig2_turnaround"), ("reproduce_fig2_icml.sh", "fig2_icml")]
+)
+def test_reproduce_scripts_run_the_presets_as_they_are_at_the_committed_grids_settings(script, folder):
+    """scripts/: the published grids are plain harness calls (no --config, no --import) whose agents are the
+    committed cells' agents (tests/test_presets.py) at the committed grid's budget and evaluation points."""
     from hyperstate.evaluation.run import build_grid, parse_args
 
-    script = (ROOT / "bench" / "reproduce_fig2_turnaround.sh").read_text()
-    presets = re.search(r"AGENTS:-([^}]*)}", script).group(1).split()
-    configs = re.search(r"--config (.*?) --workers", script.replace("\\\n", " "), re.S).group(1).split()
-    args = parse_args(
-        ["--import", str(ROOT / "bench" / "fig2_presets.py"), "--agents", *presets, "--tasks", "cheetah_dir_sparse"]
-        + ["--frames", "1000", "--out", "unused", "--no-reference", "--config", *(str(ROOT / c) for c in configs)]
-    )
-    try:
-        names, overrides = build_grid(args)
-        # The extra row is the committed oracle_rh (its hyper-state bonus at the seed paper's weight 10) with
-        # hyperx's state bonus added, that bonus's settings as hyperx's.
-        extra = agents.make("oracle_rh_rs", **overrides["oracle_rh_rs"]).config
-        grid_oracle_rh = agents.make("oracle_rh", **overrides["oracle_rh"]).config
-        assert grid_oracle_rh.bonuses[0].weight == 20.0 and extra.bonuses[0].weight == 10.0
-        committed = dataclasses.replace(
-            grid_oracle_rh, bonuses=(dataclasses.replace(grid_oracle_rh.bonuses[0], weight=10.0),)
-        )
-        hyperx = agents.make("hyperx", **overrides["hyperx"]).config
-        assert extra.bonuses == (committed.bonuses[0], hyperx.bonuses[1]) and hyperx.bonuses[1].input == "state"
-        assert dataclasses.replace(extra, bonuses=committed.bonuses) == committed
-        for name in names:
-            config = agents.make(name, **overrides[name]).config
-            assert config.ppo.network == "reference" and config.ppo.lr_anneal_frames == 50_000_000
-            assert config.ppo.num_envs == 16 and config.ppo.minibatch_unit == "transitions"  # icml_ppo over fig2's 32
-            assert config.ppo.entropy_coef == 1e-4 and config.ppo.sampled_action_cost == 0.05
-    finally:
-        for name in ("oracle_rh_prior5", "oracle_rh_rs"):
-            agents.PRESETS.pop(name, None)
-        sys.modules.pop("fig2_presets", None)
-    assert set(names) == {
-        "oracle", "oracle_rs", "oracle_rh", "oracle_rh_rs", "varibad", "varibad_rh", "hyperx", "task_aware"
-    }  # fmt: skip
-    assert overrides["hyperx"]["bonuses.1.updates_per_iteration"] == 4  # fig2.toml's bonus settings stay
-    assert "bonuses.0.weight" not in overrides["hyperx"]  # H20 touches oracle_rh alone
-    assert "--eval-every $((FRAMES / 10))" in script and "--no-reference" in script
+    text = (ROOT / "scripts" / script).read_text()
+    command = text[text.index("evaluation/run.py") :]
+    assert "--config" not in command and "--import" not in command
+    names = _script_agents(script)
+    sources = json.loads((ROOT / "docs" / "results" / folder / "sources.json").read_text())
+    assert {cell.split("__")[0] for cell in sources} == set(names)
+    budgets = {(s["budget"], s["eval_every"], s["eval_tasks"]) for s in sources.values()}
+    eval_every = int(command.split("--eval-every ")[1].split()[0])
+    assert budgets == {(20_000_000, eval_every, 20)} and "FRAMES=${1:-20000000}" in text
+    args = parse_args(["--agents", *names, "--tasks", "cheetah_dir_sparse", "--frames", "2e7", "--out", "unused",
+                       "--no-reference"])  # fmt: skip
+    built, overrides = build_grid(args)
+    assert built == names and all(o == {} for o in overrides.values())
 
 
-@pytest.mark.parametrize("path", sorted((ROOT / "bench" / "turnaround").glob("*.toml")), ids=lambda p: p.stem)
-def test_turnaround_configs_apply_on_top_of_the_figure_2_config(path):
-    """Each campaign config (docs/turnaround.md) names real fields and changes what it says it changes: its
-    [all] table on `oracle_rh`, a preset's own table on that preset (campaign presets included)."""
+CAMPAIGN = ROOT / "research" / "turnaround"
+
+
+def _campaign_agent(name: str, overrides: dict):
+    """The campaign's agent of that name: its presets were the seed paper's, today's `_paper` ones."""
+    return agents.make(f"{name}_paper" if name in agents.GRID_PRESETS else name, **overrides).config
+
+
+@pytest.mark.parametrize("path", sorted((CAMPAIGN / "configs").glob("*.toml")), ids=lambda p: p.stem)
+def test_campaign_configs_change_what_they_say_on_the_campaigns_agents(path):
+    """Each overlay of the turn-around campaign (research/turnaround/notebook.md) names real fields and changes
+    them on top of research/turnaround/fig2.toml: its [all] table on `oracle_rh`, a preset's table on it."""
     import tomllib
 
-    from hyperstate.evaluation.run import build_grid, parse_args
+    from hyperstate.evaluation.cell import import_modules
 
-    tables = tomllib.loads(path.read_text())
-    agent = next((name for name in tables if name != "all"), "oracle_rh")
-    base = ["--agents", agent, "--tasks", "cheetah_dir_sparse", "--frames", "1000", "--out", "unused"]
-    # fig2.toml has a table for its extra row; the campaign's own presets live next to the configs.
-    base += ["--import", str(ROOT / "bench" / "fig2_presets.py"), str(ROOT / "bench/turnaround/campaign_presets.py")]
     registered = set(agents.PRESETS)
+    import_modules([str(CAMPAIGN / "fig2_presets.py"), str(CAMPAIGN / "campaign_presets.py")])
     try:
-        _, plain = build_grid(parse_args(base + ["--config", str(ROOT / "bench" / "fig2.toml")]))
-        _, changed = build_grid(parse_args(base + ["--config", str(ROOT / "bench" / "fig2.toml"), str(path)]))
-        config = agents.make(agent, **changed[agent]).config
+        base, tables = tomllib.loads((CAMPAIGN / "fig2.toml").read_text()), tomllib.loads(path.read_text())
+        agent = next((name for name in tables if name != "all"), "oracle_rh")
+        plain = {**base.get("all", {}), **base.get(agent, {})}
+        changed = {**plain, **tables.get("all", {}), **tables.get(agent, {})}
+        config = _campaign_agent(agent, changed)
+        added = {k: v for k, v in changed.items() if plain.get(k) != v}
+        assert added, f"{path.name} changes nothing"
+        for key, value in added.items():
+            node = config
+            for part in key.split("."):
+                node = node[int(part)] if part.isdigit() else getattr(node, part)
+            assert node == value, key
     finally:
         for name in set(agents.PRESETS) - registered:  # whatever the imported files registered
             agents.PRESETS.pop(name)
         for module in ("fig2_presets", "campaign_presets"):
             sys.modules.pop(module, None)
-    added = {k: v for k, v in changed[agent].items() if plain[agent].get(k) != v}
-    assert added, f"{path.name} changes nothing"
-    for key, value in added.items():
-        node = config
-        for part in key.split("."):
-            node = node[int(part)] if part.isdigit() else getattr(node, part)
-        assert node == value, key
+
+
+def test_campaign_turnaround_settings_on_the_paper_presets_are_the_validated_presets():
+    """The campaign's last grid (seed presets + fig2.toml + four overlays) is what the presets now are: the
+    research's path from the seed paper's agents to the published ones, checked field for field."""
+    import tomllib
+
+    overlays = ["lr_horizon_5e7", "icml_ppo", "reference_network", "hyperstate_weight_20"]
+    tables = [tomllib.loads((CAMPAIGN / "fig2.toml").read_text())]
+    tables += [tomllib.loads((CAMPAIGN / "configs" / f"{o}.toml").read_text()) for o in overlays]
+    for name in agents.GRID_PRESETS:
+        overrides = {}
+        for table in tables:
+            overrides.update({**table.get("all", {}), **table.get(name, {})})
+        assert agents.agent_settings(_campaign_agent(name, overrides)) == agents.agent_settings(agents.get_preset(name))
 
 
 def test_grid_layout_owns_cell_names_and_paths(tmp_path):

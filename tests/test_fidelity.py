@@ -14,6 +14,7 @@ from hyperstate.agents.bonuses import BonusInput, EnsembleRND, InputSelector, Pr
 from hyperstate.agents.config import BonusConfig, PPOConfig
 from hyperstate.agents.normalization import ReturnScaler
 from hyperstate.agents.ppo import ActorCritic, _minibatches, ppo_update, value_loss
+from hyperstate.agents.presets import PAPER_PPO
 from hyperstate.agents.trainer import Trainer, bonus_anneal_factor, combine_rewards
 
 TINY = {"ppo.num_envs": 4, "ppo.rollout_length": 50, "vae.batch_trajectories": 2}
@@ -115,7 +116,8 @@ def test_transition_minibatches_partition_the_rollout():
     assert [b[0].shape for b in batches] == [(8, 3)] * 3
     seen = torch.cat([b[1] for b in batches])  # features: every transition exactly once
     assert sorted(map(tuple, seen.tolist())) == sorted(map(tuple, rollout.features.reshape(-1, 2).tolist()))
-    envs = list(_minibatches(rollout, _StoredFeatures(), PPOConfig(minibatches=2), torch.Generator().manual_seed(1)))
+    by_env = PPOConfig(minibatch_unit="envs", minibatches=2)
+    envs = list(_minibatches(rollout, _StoredFeatures(), by_env, torch.Generator().manual_seed(1)))
     assert [b[0].shape for b in envs] == [(6, 2, 3)] * 2  # whole env sequences
 
 
@@ -135,10 +137,11 @@ def _update(config: PPOConfig) -> list[torch.Tensor]:
 def test_whole_batch_advantage_normalisation():
     # With one minibatch, normalising per minibatch and over the batch are the same computation.
     one = {"minibatches": 1, "epochs": 1}
-    for a, b in zip(_update(PPOConfig(**one)), _update(PPOConfig(**one, advantage_norm="batch")), strict=True):
+    per_one = _update(PPOConfig(**one, advantage_norm="minibatch"))
+    for a, b in zip(per_one, _update(PPOConfig(**one, advantage_norm="batch")), strict=True):
         torch.testing.assert_close(a, b)
     # With several, they differ.
-    per_minibatch = _update(PPOConfig(minibatches=4))
+    per_minibatch = _update(PPOConfig(minibatches=4, advantage_norm="minibatch"))
     whole = _update(PPOConfig(minibatches=4, advantage_norm="batch"))
     assert any(not torch.equal(a, b) for a, b in zip(per_minibatch, whole, strict=True))
 
@@ -155,7 +158,7 @@ def test_clipped_huber_value_loss_by_hand():
     want = 0.5 * np.mean([max(huber(1.0, 0.0), huber(0.6, 0.0)), huber(0.0, 3.0), huber(5.0, 5.05)])
     one_head = value[:, None], returns[:, None], old[:, None]  # (batch, value heads)
     assert value_loss(*one_head, config).item() == pytest.approx(want)
-    assert value_loss(*one_head, PPOConfig()).item() == pytest.approx(0.5 * np.mean([1.0, 9.0, 0.0025]))
+    assert value_loss(*one_head, PPOConfig(value_loss="mse")).item() == pytest.approx(0.5 * np.mean([1.0, 9.0, 0.0025]))
     # Two heads: the sum of each head's loss.
     two = [torch.stack([t, 2 * t], dim=-1) for t in (value, returns, old)]
     want_second = 0.5 * np.mean([max(huber(2.0, 0.0), huber(1.1, 0.0)), huber(0.0, 6.0), huber(10.0, 10.1)])
@@ -168,7 +171,7 @@ def test_control_cost_on_the_sampled_action():
     np.testing.assert_allclose(trainer.excess_action_energy(actions), [[0.0, (2.25 - 1.0) + (4.0 - 1.0)]])
     # In training it lowers the reward PPO sees by coef × that excess (and only there).
     costly = agents.make("oracle", **TINY, **{"ppo.sampled_action_cost": 0.05, "ppo.init_log_std": 1.0})
-    free = agents.make("oracle", **TINY, **{"ppo.init_log_std": 1.0})
+    free = agents.make("oracle", **TINY, **{"ppo.sampled_action_cost": 0.0, "ppo.init_log_std": 1.0})
     a = costly.train("cheetah_dir_sparse", frames=200, seed=0, progress=False)[0]
     b = free.train("cheetah_dir_sparse", frames=200, seed=0, progress=False)[0]
     assert a["reward/extrinsic_mean"] == b["reward/extrinsic_mean"]  # the task's reward, logged before
@@ -211,8 +214,8 @@ def test_icml_presets_are_the_reference_configurations():
             dataclasses.replace(
                 p, minibatch_unit="envs", advantage_norm="minibatch", value_loss="mse", sampled_action_cost=0.0
             )
-            == PPOConfig()
-        )  # fmt: skip  (else the reference's PPO)
+            == PAPER_PPO
+        )  # fmt: skip  (else the seed paper's PPO)
 
 
 def _replay_trainer() -> Trainer:

@@ -177,14 +177,17 @@ def test_a_learning_rate_horizon_beyond_the_budget_trains_as_the_longer_runs_fir
     short.run(progress=False, on_iteration=lambda log: rates.append(short.state.optimizer.param_groups[0]["lr"]))
     lr = short.policy.config.ppo.lr
     assert rates == pytest.approx([lr, lr * 8 / 9, lr * 7 / 9], rel=1e-12)
-    long = Trainer(agents.make("hyperx", **TINY), "cheetah_dir_sparse", frames=9 * per_iteration, **kwargs)
+    budget_horizon = {"ppo.lr_anneal_frames": None}  # over its own 9 iterations
+    long = Trainer(agents.make("hyperx", **TINY, **budget_horizon), "cheetah_dir_sparse", frames=9 * per_iteration,
+                   **kwargs)  # fmt: skip
     long.run(progress=False, stop_after_iterations=3)
     for (name, a), (_, b) in zip(
         short.policy.model.state_dict().items(), long.policy.model.state_dict().items(), strict=True
     ):
         assert torch.equal(a, b), name
-    # A budget's own horizon (the default) decays to 0 at its end: the 3-iteration run would differ.
-    default = Trainer(agents.make("hyperx", **TINY), "cheetah_dir_sparse", frames=3 * per_iteration, **kwargs)
+    # The budget's own horizon (None) decays to 0 at its end: the 3-iteration run would differ.
+    default = Trainer(agents.make("hyperx", **TINY, **budget_horizon), "cheetah_dir_sparse",
+                      frames=3 * per_iteration, **kwargs)  # fmt: skip
     default.run(progress=False)
     assert not torch.equal(default.policy.model.actor["body"][-1].weight, long.policy.model.actor["body"][-1].weight)
     with pytest.raises(ValueError, match="lr_anneal_frames"):
