@@ -8,7 +8,7 @@ LOCK := constraints.txt
 # Nothing here renders: without this, dm_control tries GLFW and warns about DISPLAY.
 export MUJOCO_GL ?= disable
 
-.PHONY: demo test lint bench clean lock
+.PHONY: demo zoo test lint bench clean lock
 
 $(STAMP): setup.cfg pyproject.toml $(LOCK)
 	$(PYTHON) -m venv $(VENV)
@@ -27,14 +27,27 @@ lock:
 	  | sed -e 's/+cpu$$//'; } > $(LOCK)
 	rm -rf .lock-venv build
 
-# A small real benchmark run: two presets (+ the task-aware reference) on the sparse task, one seed.
+# The turn-around in a few minutes: the shipped agents of zoo/ deployed on cheetah_dir_sparse (behaviour
+# figures and a summary in runs/demo/deployed), then a short training run to show the loop at work.
+ZOO := zoo/hyperx__cheetah_dir_sparse__s0 zoo/oracle_rh__cheetah_dir_sparse__s0
 demo: $(STAMP)
-	$(PY) evaluation/run.py --agents oracle oracle_rh --tasks cheetah_dir_sparse --seeds 0 \
-		--frames 300000 --eval-every 60000 --out runs/demo --force
+	@for cell in $(ZOO); do [ -f $$cell/agent.pt ] || { echo "$$cell/agent.pt is missing: 'make zoo' trains it again (about 1 h)"; exit 1; }; done
+	$(PY) evaluation/run.py --deploy $(ZOO) --out runs/demo/deployed --force
+	$(PY) evaluation/run.py --agents oracle_rh --tasks cheetah_dir_sparse --seeds 0 --frames 100k \
+		--eval-every 25k --eval-tasks 4 --no-reference --no-diagnostics --out runs/demo/training --force
+	@echo; echo "The turn-around: runs/demo/deployed/figures/behaviour_hyperx__cheetah_dir_sparse__s0.png"
+
+# Trains the zoo's agents again with the grid's command (seed 0, 2e7 frames, two cells side by side) and
+# checks that each deploys to its own record's online return.
+zoo: $(STAMP)
+	AGENTS="hyperx oracle_rh" SEEDS=0 WORKERS=2 bash scripts/reproduce_fig2_turnaround.sh 2e7 runs/zoo
+	for cell in $(ZOO); do mkdir -p $$cell && cp runs/zoo/cells/$$(basename $$cell)/agent.pt runs/zoo/cells/$$(basename $$cell)/record.json $$cell/; done
+	$(PY) evaluation/run.py --deploy $(ZOO) --out runs/zoo_check --force
 
 test: $(STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m pytest -q
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --quiet --site-dir build/site
 
 bench: $(STAMP)
 	$(PY) bench/suite_speed.py

@@ -402,14 +402,7 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
         record["final"]["certainty_equivalent"] = certainty_equivalent_metrics(
             agent, spec.task, tasks, spec.episodes_per_task
         )
-    np.savez_compressed(
-        directory / grid.DEPLOYMENT,
-        rewards=final.rewards,
-        tasks=final.tasks,
-        inner_episode=final.inner_episode,
-        features=final.features,
-        **{f"obs_{k}": v for k, v in final.observations.items()},
-    )
+    save_deployment(directory, final)
     agent.save(directory / grid.AGENT)
     point_log.unlink(missing_ok=True)
     record["complete"] = True
@@ -417,6 +410,18 @@ def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
     report_progress(record["frames"], 0.0, complete=True)
     writer.close()
     return record
+
+
+def save_deployment(directory: Path, deployment: Any) -> None:
+    """The cell's final deterministic deployment as `deployment.npz` (what the behaviour plot draws)."""
+    np.savez_compressed(
+        directory / grid.DEPLOYMENT,
+        rewards=deployment.rewards,
+        tasks=deployment.tasks,
+        inner_episode=deployment.inner_episode,
+        features=deployment.features,
+        **{f"obs_{k}": v for k, v in deployment.observations.items()},
+    )
 
 
 def add_to_point(since_point: dict[str, dict[str, list[float]]], values: dict[str, dict[str, float]]) -> None:

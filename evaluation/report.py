@@ -162,6 +162,8 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
     tasks = sorted({r["task"] for r in records})
     bracket = {row["task"]: row for row in summary_rows(records)}  # Bayes-optimal bracket per task
     for task in tasks:
+        if not any(r["curve"] for r in records if r["task"] == task):
+            continue  # deployed saved agents (run.py --deploy): no training, no curves
         fig, (ax, cov_ax) = plt.subplots(1, 2, figsize=(11, 4))
         agents_ = sorted({r["agent"] for r in records if r["task"] == task})
         for agent in agents_:

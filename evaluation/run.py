@@ -78,16 +78,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     p.add_argument(
         "--agents",
         nargs="+",
-        required=True,
         metavar="A",
         help=f"agents: presets ({', '.join(agents.list_presets())}) or agents registered by --import modules",
     )
-    p.add_argument("--tasks", nargs="+", required=True, metavar="T", help=f"tasks: {', '.join(suite.TASKS)}")
+    p.add_argument(
+        "--tasks",
+        nargs="+",
+        metavar="T",
+        help=f"tasks: {', '.join(suite.TASKS)} (with --deploy: default, each saved cell's own)",
+    )
     p.add_argument("--seeds", nargs="+", type=int, default=[0], metavar="S", help="training seeds (default: 0)")
     p.add_argument(
         "--frames",
         type=frame_count,
-        required=True,
         help="environment steps of training per cell (20000000, 2e7 or 20M); with --resume, a larger budget "
         "than the grid's extends every cell to it",
     )
@@ -154,6 +157,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--no-diagnostics",
         action="store_true",
         help="skip the bonus-landscape figures (evaluation/diagnostics.py) drawn for agents with an RND bonus",
+    )
+    p.add_argument(
+        "--deploy",
+        nargs="+",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="deploy saved agents instead of training: cell folders (agent.pt + record.json, e.g. zoo/*) or "
+        "agent.pt files; writes one cell each and the report (no --agents, no --frames)",
     )
     p.add_argument("--resume", action="store_true", help="continue a grid in OUT (completed cells are kept)")
     p.add_argument("--force", action="store_true", help="delete OUT's previous results first")
@@ -427,9 +439,45 @@ def render_videos(args: argparse.Namespace) -> None:
         )
 
 
+def deploy_main(args: argparse.Namespace) -> int:
+    """--deploy: saved agents deployed on their tasks, no training."""
+    from hyperstate.evaluation.saved import SavedAgentError, deploy_saved, summary_lines
+
+    if args.agents or args.frames is not None or args.resume:
+        raise UsageError("--deploy takes saved agents: no --agents, --frames or --resume")
+    for name in args.tasks or []:
+        if name not in suite.TASKS:
+            raise UsageError(str(unknown_name("task", name, suite.TASKS, "tasks")))
+    if args.out.exists() and any(args.out.iterdir()):
+        if not args.force:
+            raise UsageError(f"--out {args.out} is not empty; pass --force to overwrite it")
+        shutil.rmtree(args.out)
+    try:
+        import_modules(args.imports)
+        records = deploy_saved(args.deploy, args.out, args.tasks, args.eval_tasks, args.episodes_per_task)
+    except SavedAgentError as e:
+        raise UsageError(str(e)) from None
+    write_results(args.out)
+    rows = write_summary(args.out, records)
+    write_figures(args.out, records)
+    print(*summary_lines(records), sep="\n")
+    print()
+    print(text_table(rows))
+    print(f"\n{len(records)} deployments; results and figures in {args.out}/")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
+    if args.deploy:
+        try:
+            return deploy_main(args)
+        except UsageError as e:
+            print(f"{program_name()}: error: {e}", file=sys.stderr)
+            return 2
     try:
+        if not args.agents or not args.tasks or args.frames is None:
+            raise UsageError("--agents, --tasks and --frames are required (or --deploy saved agents)")
         names, overrides = build_grid(args)
         eval_every = args.eval_every or max(1, args.frames // 10)
         grid = {

@@ -1,0 +1,1 @@
+../../hyperstate/__init__.py
