@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from hyperstate import suite
-from hyperstate.evaluation import grid, protocol
+from hyperstate.evaluation import cli, grid, protocol
 from hyperstate.evaluation.coverage import HyperStateCoverage
 from hyperstate.evaluation.deploy import (
     certainty_equivalent_metrics,
@@ -103,7 +103,8 @@ def write_json_atomic(path: Path, data: Any) -> None:
 def report_failure(spec: CellSpec, error: BaseException) -> str:
     """Prints one line about a failed cell to stderr and returns it."""
     line = f"{spec.cell_id}: {type(error).__name__}: {error}".splitlines()[0]
-    print(f"evaluation/run.py: cell failed (the others go on; --resume retries it): {line}", file=sys.stderr)
+    command = cli.program_name("evaluation/run.py")
+    print(f"{command}: cell failed (the others go on; --resume retries it): {line}", file=sys.stderr)
     return line
 
 

@@ -331,3 +331,23 @@ def test_init_probe_sees_the_reference_networks_first_policy_act_and_this_projec
     for row in (cleanrl, reference):
         assert set(row) == {"seed", "deterministic", "sampled", "mean_abs_action", "belief_action_difference"}
         assert all(0.0 <= row[k]["left_zone"] <= 1.0 for k in ("deterministic", "sampled"))
+
+
+def test_task_pictures_draw_every_sparse_task_with_its_own_rewards(tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("task_pictures", ROOT / "scripts" / "task_pictures.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    written = module.main(["--out", str(tmp_path)])
+    assert sorted(p.name for p in written) == sorted(
+        f"task_{n}.png"
+        for n in ("point_treasure_sparse", "point_robot_sparse", "cheetah_vel_sparse", "quadruped_goal_sparse")
+    )
+    assert all(p.read_bytes()[:4] == b"\x89PNG" for p in written)
+    # The treasure explorer is rewarded in episode 1 and goes straight back in episode 2: its second
+    # episode earns more than its first, as the task's multi-episode structure promises.
+    paths, candidates, rewards, goal = module.explore("point_treasure_sparse")
+    half = len(rewards) // 2
+    assert len(paths) == 2 and sum(rewards[half:]) > sum(rewards[:half]) > 0
+    assert np.min(np.linalg.norm(candidates - goal, axis=1)) < 1e-6  # the goal is one of the candidates

@@ -14,24 +14,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from test_evaluation import TINY_CONFIG, run
 
 from hyperstate.agents import serialization
 from hyperstate.evaluation.run import frame_count
 
 ROOT = Path(__file__).resolve().parents[1]
-RUN = [sys.executable, str(ROOT / "evaluation" / "run.py")]
-TINY = '[all]\n"ppo.num_envs" = 4\n"ppo.rollout_length" = 50\n'
-
-
-def run(args, **kwargs) -> subprocess.CompletedProcess:
-    env = {**os.environ, "MUJOCO_GL": "disable"}
-    return subprocess.run(RUN + [str(a) for a in args], capture_output=True, text=True, env=env, timeout=600, **kwargs)
 
 
 @pytest.fixture
 def tiny(tmp_path) -> Path:
-    path = tmp_path / "tiny.toml"
-    path.write_text(TINY)
+    (path := tmp_path / "tiny.toml").write_text(TINY_CONFIG)
     return path
 
 

@@ -114,3 +114,16 @@ def test_a_budget_beyond_the_fixed_learning_rate_horizon_is_refused():
     assert "lr_anneal_frames" in agents.budget_dependence(agents.get_preset("hyperx_paper"))
     icml = dataclasses.replace(agents.get_preset("hyperx_icml"), ppo=config.ppo)
     assert "bonus_anneal_frames" in agents.budget_dependence(icml)
+
+
+def test_merging_compares_agent_settings_not_runtime_fields_or_fields_added_since():
+    """New seeds of a committed grid merge into it: physics threads and fields added to the config after the
+    committed cells ran (at their reproducing value) are no difference; a real setting is."""
+    from hyperstate.agents.config import to_dict
+    from hyperstate.evaluation.merge import config_differences
+
+    committed = _recorded("fig2_turnaround", "hyperx")  # physics_threads 1, no bonuses.i.train_on
+    assert config_differences(committed, to_dict(agents.make("hyperx").config)) == []
+    assert config_differences(committed, to_dict(agents.make("hyperx", physics_threads=2).config)) == []
+    changed = config_differences(committed, to_dict(agents.make("hyperx", **{"ppo.lr": 1e-3}).config))
+    assert changed == ["ppo.lr: 0.0007 != 0.001"]
