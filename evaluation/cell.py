@@ -39,6 +39,7 @@ from hyperstate.evaluation.deploy import (
     reads_true_task,
 )
 from hyperstate.evaluation.upgrade import upgrade_record
+from hyperstate.files import write_bytes_atomic
 
 
 @dataclasses.dataclass(frozen=True)
@@ -71,21 +72,6 @@ class CellSpec:
     @property
     def directory(self) -> Path:
         return grid.cell_dir(Path(self.out), self.cell_id)
-
-
-def write_bytes_atomic(path: Path, data: bytes) -> None:
-    """Writes through a temporary file of a unique name: concurrent writers never share it."""
-    import tempfile
-
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        os.fchmod(fd, 0o644)  # mkstemp makes it private; results are for everyone to read
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
 
 
 def save_array_atomic(path: Path, array: np.ndarray) -> None:

@@ -30,12 +30,12 @@ from hyperstate.evaluation.cell import (
     materialize_imports,
     report_failure,
     run_cell,
-    write_bytes_atomic,
     write_json_atomic,
     write_results,
 )
 from hyperstate.evaluation.progress import POLL_SECONDS, RESULTS_EVERY_SECONDS, GridProgress
 from hyperstate.evaluation.storage import CHECKPOINT, CellStore
+from hyperstate.files import write_bytes_atomic
 
 RETRIES = 3  # attempts after a node or worker dies (Ray's system-failure retries); errors are not retried
 

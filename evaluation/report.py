@@ -12,6 +12,7 @@ import numpy as np
 from hyperstate import suite
 from hyperstate.evaluation import grid
 from hyperstate.evaluation.stats import bootstrap_ci, iqm, mean_ci_curve
+from hyperstate.files import replacing
 
 REFERENCE_AGENT = "task_aware"
 SUMMARY_FIELDS = [
@@ -95,13 +96,11 @@ def write_summary(out: Path, records: list[dict]) -> list[dict]:
     rows = summary_rows(records)
     extra = sorted({k for row in rows for k in row} - set(SUMMARY_FIELDS))
     fields = SUMMARY_FIELDS + extra  # the tasks' declared metrics go last
-    tmp = out / f"{grid.SUMMARY}.tmp"
-    with tmp.open("w", newline="") as f:
+    with replacing(out / grid.SUMMARY) as tmp, tmp.open("w", newline="") as f:
         writer = csv.DictWriter(f, fieldnames=fields)
         writer.writeheader()
         for row in rows:
             writer.writerow({k: "" if row.get(k) is None else row[k] for k in fields})
-    tmp.replace(out / grid.SUMMARY)
     return rows
 
 
