@@ -44,6 +44,7 @@ from hyperstate.suite._registry import (
     position_keys,
     reference_task,
     register,
+    success,
     task_prior,
     unregister,
 )
@@ -62,6 +63,7 @@ __all__ = [
     "as_generator",
     "batch",
     "bayes_estimate",
+    "success",
     "coverage",
     "exploration_metrics",
     "list_tasks",

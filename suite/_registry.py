@@ -90,6 +90,7 @@ class TaskEntry:
     position_axis: PositionAxis | None = None
     coverage: Coverage | None = None
     bayes_estimate: Callable[[np.ndarray], float] | None = None
+    success: Callable[[dict], bool] | None = None
 
 
 _REGISTRY: dict[str, TaskEntry] = {}
@@ -108,6 +109,7 @@ def register(
     position_axis: PositionAxis | None = None,
     coverage: Coverage | None = None,
     bayes_estimate: Callable[[np.ndarray], float] | None = None,
+    success: Callable[[dict], bool] | None = None,
 ) -> Callable[[Factory], Factory]:
     """Decorator registering `factory(seed=None, **kwargs)` under `name`.
 
@@ -124,15 +126,18 @@ def register(
     `position_axis` (a `PositionAxis`), if given, is the one-number position the harness plots the agent
     along; `coverage` (a `Coverage`), if given, the hyper-state grid whose visited fraction the grid logs;
     `bayes_estimate`, if given, maps the task-aware reference's returns per deployment to an estimate of
-    the Bayes-optimal online return (`summary.csv`'s `bayes_estimate`).
+    the Bayes-optimal online return (`summary.csv`'s `bayes_estimate`); `success`, if given, says from a
+    cell's final deployment metrics (the averaged `record["final"]` dict) whether that seed solved the task,
+    so that a high mean return cannot hide seeds that did not (`summary.csv`'s `success_share`).
     """
     if not isinstance(name, str) or not name:
         raise ValueError(f"task name must be a non-empty string, got {name!r}")
     for value, kind, what in ((position_axis, PositionAxis, "position_axis"), (coverage, Coverage, "coverage")):
         if value is not None and not isinstance(value, kind):
             raise TypeError(f"{what} must be a suite.{kind.__name__}, got {type(value).__name__}")
-    if bayes_estimate is not None and not callable(bayes_estimate):
-        raise TypeError(f"bayes_estimate must be callable, got {type(bayes_estimate).__name__}")
+    for value, what in ((bayes_estimate, "bayes_estimate"), (success, "success")):
+        if value is not None and not callable(value):
+            raise TypeError(f"{what} must be callable, got {type(value).__name__}")
     if reference_task is not None and (not isinstance(reference_task, str) or reference_task == name):
         raise ValueError(f"reference_task must be another task's name, got {reference_task!r}")
 
@@ -151,6 +156,7 @@ def register(
             position_axis,
             coverage,
             bayes_estimate,
+            success,
         )
         TASKS[:] = sorted(_REGISTRY)
         return factory
@@ -188,6 +194,11 @@ def coverage(name: str) -> Coverage | None:
 def bayes_estimate(name: str) -> Callable[[np.ndarray], float] | None:
     """Task `name`'s Bayes-optimal return estimator (from task-aware reference returns), or None."""
     return _lookup(name).bayes_estimate
+
+
+def success(name: str) -> Callable[[dict], bool] | None:
+    """Task `name`'s success criterion on a cell's final deployment metrics, or None."""
+    return _lookup(name).success
 
 
 def reference_task(name: str) -> str | None:

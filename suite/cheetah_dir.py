@@ -160,6 +160,14 @@ def zone_exploration_metrics(
     }
 
 
+def turn_pays(final: dict) -> bool:
+    """A seed solved the sparse task: it ends beyond the zone on the rewarded side in ≥ 90 % of deployments,
+    and the deployments whose first exit was on the wrong side earn on average (the turn-around pays). A
+    seed without wrong-first deployments has nothing to turn from and counts on `correct_direction` alone."""
+    wrong_first = final.get("return_wrong_first")
+    return final.get("correct_direction", 0.0) >= 0.9 and (wrong_first is None or wrong_first > 0)
+
+
 def _register(name: str, zone_radius: float) -> None:
     def factory(
         seed: SeedLike = None,
@@ -199,6 +207,7 @@ def _register(name: str, zone_radius: float) -> None:
         position_axis=position_axis(zone_radius),
         coverage=COVERAGE,
         bayes_estimate=functools.partial(bayes_optimal_estimate, zone_radius=zone_radius),
+        success=turn_pays if zone_radius > 0 else None,
     )(factory)
 
 

@@ -6,6 +6,7 @@ import dataclasses
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from hyperstate import agents
@@ -127,3 +128,27 @@ def test_merging_compares_agent_settings_not_runtime_fields_or_fields_added_sinc
     assert config_differences(committed, to_dict(agents.make("hyperx", physics_threads=2).config)) == []
     changed = config_differences(committed, to_dict(agents.make("hyperx", **{"ppo.lr": 1e-3}).config))
     assert changed == ["ppo.lr: 0.0007 != 0.001"]
+
+
+def _wilson(k: int, n: int, z: float = 1.959963984540054) -> tuple[float, float]:
+    p = k / n
+    centre, half = (p + z * z / (2 * n)) / (1 + z * z / n), z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return centre - half / (1 + z * z / n), centre + half / (1 + z * z / n)
+
+
+def test_summary_counts_the_seeds_whose_turn_pays_with_a_wilson_interval():
+    """The committed grid's records, read again: the share of seeds whose turn pays (`correct_direction`
+    ≥ 0.9 and wrong-first tasks earning) next to the mean, so a high mean cannot hide a one-way runner."""
+    from hyperstate.evaluation.cell import load_records
+    from hyperstate.evaluation.report import summary_rows
+
+    rows = {r["agent"]: r for r in summary_rows(load_records(RESULTS / "fig2_turnaround"))}
+    solved = {agent: rows[agent]["success_seeds"] for agent in agents.GRID_PRESETS}
+    assert solved == {"hyperx": 3, "oracle_rh": 3, "varibad_rh": 1, "oracle_rs": 1, "oracle": 0, "varibad": 0,
+                      "task_aware": 3}  # fmt: skip
+    for agent, k in solved.items():
+        low, high = _wilson(k, 3)
+        assert rows[agent]["success_ci95_low"] == pytest.approx(low, abs=1e-9)
+        assert rows[agent]["success_ci95_high"] == pytest.approx(high, abs=1e-9)
+    # oracle_rs's mean passes "≥ 450" with 2 of its 3 seeds one-way: the share says so.
+    assert rows["oracle_rs"]["online_return_mean"] > 450 and rows["oracle_rs"]["success_share"] == pytest.approx(1 / 3)
