@@ -60,6 +60,17 @@ def one_hot_direction(direction: np.ndarray) -> np.ndarray:
     return np.stack([1.0 - forward, forward], axis=-1)
 
 
+def direction_reward_and_belief(
+    task: np.ndarray, vx: np.ndarray | float, outside: np.ndarray | bool, belief: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """One step's velocity reward and exact belief after it, for one task (`task` (1,), scalars) or a batch
+    (`task` (N, 1), (N,) arrays): `d · vx` outside the zone and 0 inside, and the belief one-hot on d once
+    outside, unchanged inside. The dm_control task and the fast batch both call this."""
+    task, outside = np.asarray(task, dtype=np.float64), np.asarray(outside, dtype=bool)
+    reward = np.where(outside, task[..., 0] * vx, 0.0)
+    return reward, np.where(outside[..., None], one_hot_direction(task), belief)
+
+
 class CheetahDirection(CheetahZoneTask):
     """A meta-task where the cheetah must find out which way to run; see the module docstring."""
 
@@ -83,9 +94,8 @@ class CheetahDirection(CheetahZoneTask):
         return "task: run forward ->" if self.direction > 0 else "task: run backward <-"
 
     def zone_reward(self, vx: float, outside: bool) -> float:
-        if outside:
-            self._belief = one_hot_direction(self._task)
-        return self.direction * vx if outside else 0.0
+        reward, self._belief = direction_reward_and_belief(self._task, vx, outside, self._belief)
+        return float(reward)
 
 
 def bayes_optimal_estimate(reference_returns: np.ndarray, zone_radius: float = ZONE_RADIUS) -> float:
@@ -109,8 +119,8 @@ class CheetahDirectionBatch(CheetahZoneBatch):
         super().__init__(num_envs, seed, lambda s: CheetahDirection(random=s, **task_kwargs), num_threads=num_threads)
 
     def zone_reward(self, vx: np.ndarray, outside: np.ndarray) -> np.ndarray:
-        self._belief[outside] = one_hot_direction(self._task[outside])
-        return np.where(outside, self._task[:, 0] * vx, 0.0)
+        reward, self._belief[:] = direction_reward_and_belief(self._task, vx, outside, self._belief)
+        return reward
 
 
 def zone_exploration_metrics(
