@@ -45,7 +45,9 @@ class Policy:
         self._built = False
 
     # Construction ----------------------------------------------------------------------------------
-    def _build(self, obs_spec: dict, action_spec, seed: int, position_keys: tuple[str, ...] | None = None) -> None:
+    def build(self, obs_spec: dict, action_spec, seed: int, position_keys: tuple[str, ...] | None = None) -> None:
+        """Creates the networks, belief and bonuses for a task's observation and action specs (the trainer
+        calls it; `load` does for a saved agent)."""
         cfg = self.config
         self.position_keys = position_keys
         torch.manual_seed(seed if cfg.init_seed is None else cfg.init_seed)  # every network's initial weights
@@ -113,24 +115,26 @@ class Policy:
         cfg = self.config
         return ActorCritic(self.state_dim, self.belief.feature_dim, self.action_dim, cfg.ppo, cfg.value_heads)
 
-    def _state_vector(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+    def state_vector(self, obs: dict[str, np.ndarray]) -> np.ndarray:
+        """The policy's state input: its state keys of a batch of observations, flattened, (N, state_dim)."""
         return np.concatenate(
             [np.asarray(obs[k], np.float64).reshape(len(obs[k]), -1) for k in self.state_keys], axis=-1
         )
 
-    def _normalized(self, state: np.ndarray) -> torch.Tensor:
+    def normalized(self, state: np.ndarray) -> torch.Tensor:
+        """`state_vector` output as the networks see it (running-normalised when `ppo.norm_obs`)."""
         x = self.obs_stats.normalize(state) if self.config.ppo.norm_obs else state
         return torch.as_tensor(x, dtype=torch.float32)
 
     @staticmethod
-    def _tensors(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
-        # Beliefs read only the privileged keys from observations (the state comes separately).
+    def tensors(obs: dict[str, np.ndarray]) -> dict[str, torch.Tensor]:
+        """The privileged observation keys as tensors: all a belief reads besides the state."""
         return {k: torch.as_tensor(np.asarray(obs[k]), dtype=torch.float32) for k in PRIVILEGED_KEYS if k in obs}
 
     # Deployment -------------------------------------------------------------------------------------
     def initial_state(self, obs: dict[str, np.ndarray]) -> AgentState:
         """The prior belief for a batch of first observations (the start of a BAMDP episode)."""
-        t = self._tensors(obs)
+        t = self.tensors(obs)
         n = len(next(iter(obs.values())))
         return AgentState(self.belief.initial_state(n, t), torch.zeros(n, self.action_dim))
 
@@ -149,7 +153,7 @@ class Policy:
         if not self._built:
             raise RuntimeError("agent has no networks yet: train() or load() it first")
         with torch.no_grad():
-            raw = self._state_vector(obs)
+            raw = self.state_vector(obs)
             if state is None:
                 state = self.initial_state(obs)
             else:
@@ -159,10 +163,10 @@ class Policy:
                     state.prev_action,
                     torch.as_tensor(np.asarray(reward, np.float32).reshape(-1, 1)),
                     torch.as_tensor(raw, dtype=torch.float32),
-                    self._tensors(obs),
+                    self.tensors(obs),
                 )
                 state = AgentState(self.belief.update(state.belief, transition), state.prev_action)
-            dist = self.model.distribution(self._normalized(raw), self.belief.features(state.belief))
+            dist = self.model.distribution(self.normalized(raw), self.belief.features(state.belief))
             action = dist.mean if deterministic else dist.sample()
         return action.numpy().astype(np.float64), AgentState(state.belief, action)
 
@@ -177,7 +181,7 @@ class Policy:
         Figure 1 (evaluation/diagnostics.py)."""
         if not self._built:
             raise RuntimeError("agent has no networks yet: train() or load() it first")
-        next_state = torch.as_tensor(self._state_vector(obs), dtype=torch.float32)
+        next_state = torch.as_tensor(self.state_vector(obs), dtype=torch.float32)
         m = len(next_state)
         batch = BonusInput(
             state=next_state,
@@ -194,10 +198,10 @@ class Policy:
         oracle belief on a task without an exact belief; builds nothing that training keeps."""
         env = suite.load(task, seed=0, privileged=True, **(task_kwargs or {}))
         probe = Policy(self.config, self.name)
-        probe._build(env.observation_spec(), env.action_spec(), 0, suite.position_keys(task))
+        probe.build(env.observation_spec(), env.action_spec(), 0, suite.position_keys(task))
 
     # Saving ------------------------------------------------------------------------------------------
-    def _modules_state(self, deployable: bool = False) -> dict:
+    def modules_state(self, deployable: bool = False) -> dict:
         """Networks and statistics; `deployable` leaves out what only training needs (a bonus's input
         buffer and optimiser: up to buffer_size inputs, which a saved agent does not carry)."""
         bonuses = [b.state_dict() for b in self.bonuses]
@@ -211,7 +215,8 @@ class Policy:
             "obs_stats": self.obs_stats.state_dict(),
         }
 
-    def _load_modules_state(self, state: dict) -> None:
+    def load_modules_state(self, state: dict) -> None:
+        """Restores what `modules_state` returned."""
         self.model.load_state_dict(state["model"])
         self.belief.load_state_dict(state["belief"])
         for b, s in zip(self.bonuses, state["bonuses"], strict=True):
@@ -229,7 +234,7 @@ class Policy:
                 "obs_spec": self.obs_spec,
                 "action_bounds": self.action_bounds,
                 "position_keys": self.position_keys,
-                "modules": self._modules_state(deployable=True),
+                "modules": self.modules_state(deployable=True),
             },
             path,
             kind="agent",
@@ -246,6 +251,6 @@ class Policy:
         obs_spec = {k: specs.Array(shape, np.dtype(dtype), name=k) for k, (shape, dtype) in saved["obs_spec"].items()}
         low, high = saved["action_bounds"]
         bounds = specs.BoundedArray(low.shape, np.float64, low, high)
-        agent._build(obs_spec, bounds, seed=0, position_keys=saved.get("position_keys"))
-        agent._load_modules_state(saved["modules"])
+        agent.build(obs_spec, bounds, seed=0, position_keys=saved.get("position_keys"))
+        agent.load_modules_state(saved["modules"])
         return agent

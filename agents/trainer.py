@@ -168,7 +168,7 @@ class TrainState:
             "seed": self.seed,
             "frames": self.frames,
             "iteration": self.iteration,
-            "modules": self.policy._modules_state(),
+            "modules": self.policy.modules_state(),
             "optimizer": self.optimizer.state_dict(),
             "env": self.env.state_dict(),
             "carry": {
@@ -187,7 +187,7 @@ class TrainState:
         }
 
     def load_state_dict(self, saved: dict) -> None:
-        self.policy._load_modules_state(saved["modules"])
+        self.policy.load_modules_state(saved["modules"])
         self.optimizer.load_state_dict(saved["optimizer"])
         self.env.load_state_dict(saved["env"])
         self.ext_scaler.load_state_dict(saved["ext_scaler"])
@@ -223,7 +223,7 @@ class Trainer:
         # A runtime choice: parallel cells of a grid share the cores through $HYPERSTATE_PHYSICS_THREADS.
         threads = cfg.physics_threads or int(os.environ.get("HYPERSTATE_PHYSICS_THREADS", "0"))
         env = suite.batch(task, p.num_envs, seed=seed, num_threads=threads, privileged=True, **(task_kwargs or {}))
-        policy._build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(task))
+        policy.build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(task))
         self.policy = policy
         self.iterations = math.ceil(frames / (p.num_envs * p.rollout_length))
         # Bonus annealing counts its progress over the budget, or over `bonus_anneal_frames` when set.
@@ -235,7 +235,7 @@ class Trainer:
         first = env.reset()
         carry = Carry(
             obs=first.observation,
-            belief=policy.belief.initial_state(p.num_envs, policy._tensors(first.observation)),
+            belief=policy.belief.initial_state(p.num_envs, policy.tensors(first.observation)),
             is_start=np.ones(p.num_envs, bool),
             episode_return=np.zeros(p.num_envs),
         )
@@ -369,10 +369,10 @@ class Trainer:
         clock.start()
         with torch.inference_mode():
             for t in range(p.rollout_length):
-                raw = policy._state_vector(obs)
+                raw = policy.state_vector(obs)
                 if p.norm_obs:
                     policy.obs_stats.update(raw)
-                normalized = policy._normalized(raw)
+                normalized = policy.normalized(raw)
                 features = policy.belief.features(bstate)
                 mean, std, value = policy.model.step(normalized, features)
                 noise = torch.randn(mean.shape, generator=policy.generator)
@@ -381,18 +381,18 @@ class Trainer:
                 out = state.env.step(action.numpy().astype(np.float64))
                 clock.mark("physics")
                 final = out.final_observation
-                next_raw = policy._state_vector(final)
+                next_raw = policy.state_vector(final)
                 reward = torch.as_tensor(out.reward, dtype=torch.float32)[:, None]
                 transition = Transition(
-                    action, reward, torch.as_tensor(next_raw, dtype=torch.float32), policy._tensors(final)
+                    action, reward, torch.as_tensor(next_raw, dtype=torch.float32), policy.tensors(final)
                 )
                 bnext = policy.belief.update(bstate, transition)
                 next_features = policy.belief.features(bnext)
                 last = out.last
                 r.next_values[t] = 0.0
                 if last.any():
-                    r.next_values[t] = policy.model.value(policy._normalized(next_raw), next_features)
-                    bnext = policy.belief.reset_where(bnext, torch.as_tensor(last), policy._tensors(out.observation))
+                    r.next_values[t] = policy.model.value(policy.normalized(next_raw), next_features)
+                    bnext = policy.belief.reset_where(bnext, torch.as_tensor(last), policy.tensors(out.observation))
                 clock.mark("belief")
                 for k, v in obs.items():
                     r.raw_obs[k][t] = v
@@ -414,7 +414,7 @@ class Trainer:
                 obs, bstate, is_start = out.observation, bnext, last
                 clock.mark("rollout")
             final_value = policy.model.value(
-                policy._normalized(policy._state_vector(obs)), policy.belief.features(bstate)
+                policy.normalized(policy.state_vector(obs)), policy.belief.features(bstate)
             )
             # V(s_{t+1}) for steps that did not end an episode is the next step's value; only episode ends
             # bootstrap with the discount the environment gave.

@@ -84,7 +84,7 @@ def test_init_seed_and_bonus_init_seed_fix_the_initial_weights_and_nothing_else(
 
     def built(seed, **overrides):
         agent = agents.make("hyperx", **TINY, **overrides)
-        agent._build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(task))
+        agent.build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(task))
         return agent
 
     reference, borrowed, own = built(0), built(2, init_seed=0), built(2)

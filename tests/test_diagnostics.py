@@ -79,7 +79,7 @@ def test_bonus_value_is_the_reward_without_learning(cell):
     assert all(np.array_equal(np.asarray(stats[k]), np.asarray(after[k])) for k in stats)  # learned nothing
     # With statistics that one more batch cannot move, the training reward is the same function.
     bonus.input_stats.count = 1e15
-    state = torch.as_tensor(agent._state_vector(obs), dtype=torch.float32)
+    state = torch.as_tensor(agent.state_vector(obs), dtype=torch.float32)
     feats = torch.as_tensor(features, dtype=torch.float32)
     full = BonusInput(state, torch.zeros(5, 6), torch.zeros(5, 1), state, feats, feats)
     np.testing.assert_allclose(bonus.reward(full).numpy(), values, rtol=1e-5)

@@ -114,7 +114,7 @@ def test_agent_files_from_before_the_format_still_load(tmp_path):
         "obs_spec": {k: (shape, np.dtype(dtype)) for k, (shape, dtype) in agent.obs_spec.items()},
         "action_bounds": agent.action_bounds,
         "position_keys": agent.position_keys,
-        "modules": agent._modules_state(),
+        "modules": agent.modules_state(),
     }
     torch.save(legacy, tmp_path / "old_agent.pt")
     loaded = agents.Agent.load(tmp_path / "old_agent.pt")

@@ -32,7 +32,7 @@ ZONE = 5.0
 def probe(preset: str, seed: int, overrides: dict, tasks: np.ndarray) -> dict:
     agent = agents.make(preset, **overrides)
     env = suite.load(TASK, seed=0, privileged=True)
-    agent._build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(TASK))
+    agent.build(env.observation_spec(), env.action_spec(), seed, suite.position_keys(TASK))
     row: dict = {"seed": seed}
     for label, deterministic in (("deterministic", True), ("sampled", False)):
         x = deploy(agent, TASK, tasks, deterministic=deterministic).observations["x_displacement"][..., 0]
