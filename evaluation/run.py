@@ -229,6 +229,13 @@ def load_config_file(path: Path | None) -> dict:
     return data
 
 
+def check_tasks(names: list[str]) -> None:
+    """UsageError, with did-you-mean, for a task nobody registered."""
+    for name in names:
+        if name not in suite.TASKS:
+            raise UsageError(str(unknown_name("task", name, suite.TASKS, "tasks")))
+
+
 def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
     """Validates names and overrides; returns the agent list and each agent's overrides."""
     try:
@@ -237,9 +244,7 @@ def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
         raise UsageError(f"--import: {type(e).__name__}: {e}") from None
     if args.frames <= 0:
         raise UsageError(f"--frames must be positive, got {args.frames}")
-    for name in args.tasks:
-        if name not in suite.TASKS:
-            raise UsageError(str(unknown_name("task", name, suite.TASKS, "tasks")))
+    check_tasks(args.tasks)
     if args.physics_threads is not None and args.physics_threads < 1:
         raise UsageError(f"--physics-threads must be positive, got {args.physics_threads}")
     for name in args.agents:
@@ -445,9 +450,7 @@ def deploy_main(args: argparse.Namespace) -> int:
 
     if args.agents or args.frames is not None or args.resume:
         raise UsageError("--deploy takes saved agents: no --agents, --frames or --resume")
-    for name in args.tasks or []:
-        if name not in suite.TASKS:
-            raise UsageError(str(unknown_name("task", name, suite.TASKS, "tasks")))
+    check_tasks(args.tasks or [])
     if args.out.exists() and any(args.out.iterdir()):
         if not args.force:
             raise UsageError(f"--out {args.out} is not empty; pass --force to overwrite it")

@@ -47,9 +47,12 @@ def deploy_saved(
     records = []
     for path in paths:
         agent_file, source = _source(Path(path))
-        saved = agents_saved_name(agent_file)
-        name = source["agent"] if source else saved.split(" seed ")[0]
-        seed = source["seed"] if source else int(saved.split(" seed ")[1]) if " seed " in saved else 0
+        if source:
+            name, seed = source["agent"], source["seed"]
+        else:  # only the file: its saved name says the agent ("hyperx seed 0")
+            saved = agents_saved_name(agent_file)
+            name, _, seed_text = saved.partition(" seed ")
+            seed = int(seed_text) if seed_text else 0
         try:
             agent = protocol.load_agent(name, agent_file)
         except (ValueError, TypeError, OSError) as e:
