@@ -260,12 +260,18 @@ def _probe_plot(records: list[dict], task: str, figures: Path, plt) -> Path | No
 
 def _behaviour_plot(out: Path, record: dict, figures: Path, plt) -> Path | None:
     """Position vs step of the final deployment, one line per distinct task, along the position axis the
-    task declares (`suite.PositionAxis`), its region's borders dashed; None for a task without one."""
+    task declares (`suite.PositionAxis`), its region's borders dashed; or, for a task that declares a
+    `suite.TopDownView` instead, the deployment's paths on the plane. None for a task with neither."""
     axis = suite.position_axis(record["task"])
     cell = grid.record_cell_id(record)
     npz = grid.cell_dir(out, cell) / grid.DEPLOYMENT
-    if axis is None or not npz.exists():
+    if not npz.exists():
         return None
+    if axis is None:
+        view = suite.top_down(record["task"])
+        if view is None:
+            return None
+        return _top_down_plot(np.load(npz), record, view, figures / f"behaviour_{cell}.png", plt)
     data = np.load(npz)
     if f"obs_{axis.key}" not in data:
         return None
@@ -281,6 +287,40 @@ def _behaviour_plot(out: Path, record: dict, figures: Path, plt) -> Path | None:
     ax.set_ylabel(axis.label)
     ax.set_title(f"{record['agent']} on {record['task']}, seed {record['seed']}")
     ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+TOP_DOWN_PANELS = 4  # distinct tasks drawn side by side in a top-down behaviour plot
+
+
+def _top_down_plot(data, record: dict, view: suite.TopDownView, path: Path, plt) -> Path | None:
+    """The final deployment's path on the plane for up to `TOP_DOWN_PANELS` distinct tasks, one panel
+    each, over the scene the task draws (`view.draw_scene`); the start is a circle, the end a cross."""
+    if f"obs_{view.key}" not in data:
+        return None
+    xy, tasks, rewards = data[f"obs_{view.key}"][..., :2], data["tasks"], data["rewards"]
+    firsts = [int(np.flatnonzero((tasks == value).all(axis=1))[0]) for value in np.unique(tasks, axis=0)]
+    firsts = sorted(firsts)[:TOP_DOWN_PANELS]
+    x_min, x_max, y_min, y_max = view.extent
+    width = 3.2 * (x_max - x_min) / max(y_max - y_min, x_max - x_min)
+    height = 3.2 * (y_max - y_min) / max(y_max - y_min, x_max - x_min)
+    fig, axes = plt.subplots(1, len(firsts), figsize=(width * len(firsts) + 0.4, height + 0.8), squeeze=False)
+    for ax, i in zip(axes[0], firsts, strict=True):
+        if view.draw_scene is not None:
+            view.draw_scene(ax, tasks[i])
+        ax.plot(xy[:, i, 0], xy[:, i, 1], "-", color="tab:blue", linewidth=1.5, alpha=0.8)
+        ax.plot(*xy[0, i], "o", color="tab:blue")
+        ax.plot(*xy[-1, i], "x", color="tab:blue", markersize=8)
+        ax.set_xlim(x_min, x_max)
+        ax.set_ylim(y_min, y_max)
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_title(f"return {rewards[:, i].sum():.1f}", fontsize=9)
+    fig.suptitle(f"{record['agent']} on {record['task']}, seed {record['seed']}", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=100)
     plt.close(fig)

@@ -28,12 +28,13 @@ def _default_gl_backend() -> None:
 
 _default_gl_backend()
 
-from hyperstate.suite import cheetah_dir, cheetah_vel, point_robot, quadruped_goal  # noqa: F401  (register the built-in tasks)
+from hyperstate.suite import cheetah_dir, cheetah_vel, mountain_treasure, point_robot, quadruped_goal  # noqa: F401  (register the built-in tasks)
 from hyperstate.suite._batch import BatchEnv, BatchStep, LoopBatch
 from hyperstate.suite._registry import (
     TASKS,
     Coverage,
     PositionAxis,
+    TopDownView,
     batch,
     bayes_estimate,
     coverage,
@@ -46,6 +47,7 @@ from hyperstate.suite._registry import (
     register,
     success,
     task_prior,
+    top_down,
     unregister,
 )
 from hyperstate.suite._seeding import as_generator, spawn_seeds
@@ -60,6 +62,7 @@ __all__ = [
     "MetaTask",
     "PositionAxis",
     "TaskPrior",
+    "TopDownView",
     "as_generator",
     "batch",
     "bayes_estimate",
@@ -74,5 +77,6 @@ __all__ = [
     "register",
     "spawn_seeds",
     "task_prior",
+    "top_down",
     "unregister",
 ]

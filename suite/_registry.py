@@ -78,6 +78,29 @@ class Coverage:
 
 
 @dataclasses.dataclass(frozen=True)
+class TopDownView:
+    """A top-down view of a task on the plane, for tasks whose position is two numbers: the behaviour plot
+    draws the final deployment's path in it (evaluation/report.py).
+
+    `key` is the observation whose first two components are (x, y); `extent` the (x_min, x_max, y_min,
+    y_max) drawn; `draw_scene(ax, task)`, if given, draws the task's fixed scene and the given task's
+    parameters (walls, candidate goals, the true goal) into a matplotlib axes before the path is drawn.
+    """
+
+    key: str
+    extent: tuple[float, float, float, float]
+    draw_scene: Callable[[Any, np.ndarray], None] | None = None
+
+    def __post_init__(self) -> None:
+        x_min, x_max, y_min, y_max = (float(v) for v in self.extent)
+        if not (x_min < x_max and y_min < y_max):
+            raise ValueError(f"TopDownView extent must be (x_min, x_max, y_min, y_max), got {self.extent}")
+        object.__setattr__(self, "extent", (x_min, x_max, y_min, y_max))
+        if self.draw_scene is not None and not callable(self.draw_scene):
+            raise TypeError(f"draw_scene must be callable, got {type(self.draw_scene).__name__}")
+
+
+@dataclasses.dataclass(frozen=True)
 class TaskEntry:
     """One registered meta-task."""
 
@@ -91,6 +114,7 @@ class TaskEntry:
     coverage: Coverage | None = None
     bayes_estimate: Callable[[np.ndarray], float] | None = None
     success: Callable[[dict], bool] | None = None
+    top_down: TopDownView | None = None
 
 
 _REGISTRY: dict[str, TaskEntry] = {}
@@ -110,6 +134,7 @@ def register(
     coverage: Coverage | None = None,
     bayes_estimate: Callable[[np.ndarray], float] | None = None,
     success: Callable[[dict], bool] | None = None,
+    top_down: TopDownView | None = None,
 ) -> Callable[[Factory], Factory]:
     """Decorator registering `factory(seed=None, **kwargs)` under `name`.
 
@@ -128,11 +153,16 @@ def register(
     `bayes_estimate`, if given, maps the task-aware reference's returns per deployment to an estimate of
     the Bayes-optimal online return (`summary.csv`'s `bayes_estimate`); `success`, if given, says from a
     cell's final deployment metrics (the averaged `record["final"]` dict) whether that seed solved the task,
-    so that a high mean return cannot hide seeds that did not (`summary.csv`'s `success_share`).
+    so that a high mean return cannot hide seeds that did not (`summary.csv`'s `success_share`);
+    `top_down` (a `TopDownView`), if given, is the plane the behaviour plot draws a two-number position in.
     """
     if not isinstance(name, str) or not name:
         raise ValueError(f"task name must be a non-empty string, got {name!r}")
-    for value, kind, what in ((position_axis, PositionAxis, "position_axis"), (coverage, Coverage, "coverage")):
+    for value, kind, what in (
+        (position_axis, PositionAxis, "position_axis"),
+        (coverage, Coverage, "coverage"),
+        (top_down, TopDownView, "top_down"),
+    ):
         if value is not None and not isinstance(value, kind):
             raise TypeError(f"{what} must be a suite.{kind.__name__}, got {type(value).__name__}")
     for value, what in ((bayes_estimate, "bayes_estimate"), (success, "success")):
@@ -157,6 +187,7 @@ def register(
             coverage,
             bayes_estimate,
             success,
+            top_down,
         )
         TASKS[:] = sorted(_REGISTRY)
         return factory
@@ -199,6 +230,11 @@ def bayes_estimate(name: str) -> Callable[[np.ndarray], float] | None:
 def success(name: str) -> Callable[[dict], bool] | None:
     """Task `name`'s success criterion on a cell's final deployment metrics, or None."""
     return _lookup(name).success
+
+
+def top_down(name: str) -> TopDownView | None:
+    """The top-down view task `name` declares for behaviour plots, or None."""
+    return _lookup(name).top_down
 
 
 def reference_task(name: str) -> str | None:

@@ -1,4 +1,4 @@
-"""The task catalogue beyond cheetah-direction: point robot, treasure, cheetah velocity.
+"""The task catalogue beyond cheetah-direction: point robot, treasure, cheetah velocity, quadruped, mountain.
 
 Every task gets the same battery as cheetah_dir (dm_env conformance, specs, determinism, batched
 simulator equality step for step); each task's reward and belief are recomputed independently.
@@ -23,7 +23,11 @@ NEW_TASKS = {
     "cheetah_vel_sparse": {"episode_length": 20, "episodes_per_task": 2},
     "cheetah_vel": {"episode_length": 20},
     "quadruped_goal_sparse": {"episode_length": 20, "episodes_per_task": 2},
+    "mountain_treasure_sparse": {"episode_length": 20, "episodes_per_task": 2},
+    "mountain_treasure_k8_sparse": {"episode_length": 20, "episodes_per_task": 2},
+    "mountain_treasure": {"episode_length": 20},
 }
+BELIEF_TASKS = {"point_treasure_sparse", "mountain_treasure_k8_sparse"}  # finite priors: an exact belief
 
 
 def action_size(name: str) -> int:
@@ -66,7 +70,7 @@ def test_specs_finite_fresh_arrays_and_registration(name):
         previous = step.observation
         if step.last():
             previous = env.reset().observation
-    assert "task" in spec and ("belief" in spec) == (name == "point_treasure_sparse")
+    assert "task" in spec and ("belief" in spec) == (name in BELIEF_TASKS)
 
 
 @pytest.mark.parametrize("name", sorted(NEW_TASKS))

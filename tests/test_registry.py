@@ -123,6 +123,8 @@ def test_reference_tasks_are_dense_counterparts_with_the_same_interface():
         "cheetah_dir_sparse": "cheetah_dir",
         "cheetah_vel_sparse": "cheetah_vel",
         "point_robot_sparse": "point_robot",
+        "mountain_treasure_sparse": "mountain_treasure",
+        "mountain_treasure_k8_sparse": "mountain_treasure_k8",
     }
     for sparse, dense in pairs.items():
         a, b = suite.load(sparse, seed=0, privileged=True), suite.load(dense, seed=0, privileged=True)
