@@ -28,7 +28,7 @@ def _default_gl_backend() -> None:
 
 _default_gl_backend()
 
-from hyperstate.suite import cheetah_dir, cheetah_vel, mountain_treasure, point_robot, quadruped_goal  # noqa: F401  (register the built-in tasks)
+from hyperstate.suite import cheetah_dir, cheetah_vel, mountain_treasure, point_robot, quadruped_goal, rooms  # noqa: F401  (register the built-in tasks)
 from hyperstate.suite._batch import BatchEnv, BatchStep, LoopBatch
 from hyperstate.suite._registry import (
     TASKS,

@@ -1,4 +1,4 @@
-"""The task catalogue beyond cheetah-direction: point robot, treasure, cheetah velocity, quadruped, mountain.
+"""The task catalogue beyond cheetah-direction: point robot, cheetah velocity, quadruped, mountain, rooms.
 
 Every task gets the same battery as cheetah_dir (dm_env conformance, specs, determinism, batched
 simulator equality step for step); each task's reward and belief are recomputed independently.
@@ -26,8 +26,9 @@ NEW_TASKS = {
     "mountain_treasure_sparse": {"episode_length": 20, "episodes_per_task": 2},
     "mountain_treasure_k8_sparse": {"episode_length": 20, "episodes_per_task": 2},
     "mountain_treasure": {"episode_length": 20},
+    "rooms_sparse": {"episode_length": 20, "episodes_per_task": 2},
 }
-BELIEF_TASKS = {"point_treasure_sparse", "mountain_treasure_k8_sparse"}  # finite priors: an exact belief
+BELIEF_TASKS = {"point_treasure_sparse", "mountain_treasure_k8_sparse", "rooms_sparse"}  # finite priors
 
 
 def action_size(name: str) -> int:
