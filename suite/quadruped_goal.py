@@ -8,19 +8,24 @@ contacts (dm_control's quadruped initialisation with the orientation restricted 
 Observations: dm_control's quadruped observations plus `position`, the torso's (x, y) from the start
 and `heading` (cos, sin of the torso's yaw), which a navigator needs. No exact belief is exposed: after
 an unrewarded step the posterior over the angle is the prior minus an arc, not a fixed-size vector.
-Registered without a fast batch: `suite.batch` steps dm_control environments (`LoopBatch`).
+Fast batch: `QuadrupedGoalBatch` (one `mujoco.batch.Batch`), step for step equal to the dm_control
+environment, initial-height search and first observation after a reset included.
 """
 
 from __future__ import annotations
 
 import collections
+import copy
 
+import mujoco
+import mujoco.batch
 import numpy as np
 from dm_control.rl import control
 from dm_control.suite import quadruped
 
+from hyperstate.suite._mujoco_batch import MujocoBatch
 from hyperstate.suite._registry import register
-from hyperstate.suite._seeding import SeedLike
+from hyperstate.suite._seeding import SeedLike, spawn_seeds
 from hyperstate.suite.base import Marker, MetaTask, check_action
 
 CONTROL_TIMESTEP = 0.02  # dm_control's quadruped
@@ -28,6 +33,15 @@ EPISODE_LENGTH = 500  # control steps per MDP episode (10 s)
 GOAL_DISTANCE = 2.0  # radius of the circle of goals (m)
 GOAL_RADIUS = 0.5  # the reward is paid within this distance of the goal (m)
 FLOOR_SIZE = 6.0  # half-width of the floor (m)
+HEIGHT_STEP = 0.01  # dm_control's _find_non_contacting_height: 1 cm steps up from z = 0
+MAX_HEIGHT_ATTEMPTS = 10000  # ... and its limit
+
+
+def _norms(v: np.ndarray) -> np.ndarray:
+    """Euclidean norm of each row of `v` (N, 2). The task and its batch both use this one function, so
+    their rewards and headings agree bit for bit whatever the BLAS (a single vector's `np.linalg.norm`
+    is a BLAS dot, which a sum of squares over rows does not reproduce on every CPU)."""
+    return np.sqrt((v[:, None, :] @ v[:, :, None])[:, 0, 0])
 
 
 class CircleGoalPrior:
@@ -85,15 +99,139 @@ class QuadrupedGoal(MetaTask):
         physics.set_control(np.clip(check_action(action, spec), spec.minimum, spec.maximum))
 
     def transition_reward(self, physics: quadruped.Physics) -> float:
-        distance = np.linalg.norm(physics.named.data.xpos["torso", :2] - self._task)
+        distance = _norms((physics.named.data.xpos["torso", :2] - self._task)[None])[0]
         return float(distance <= self.goal_radius)
 
     def mdp_observation(self, physics: quadruped.Physics) -> collections.OrderedDict:
         obs = quadruped._common_observations(physics)
         obs["position"] = physics.named.data.xpos["torso", :2].copy()
         forward = physics.named.data.xmat["torso"].reshape(3, 3)[:2, 0]  # the torso's x-axis in the world
-        obs["heading"] = forward / max(np.linalg.norm(forward), 1e-9)
+        obs["heading"] = forward / max(_norms(forward[None])[0], 1e-9)
         return obs
+
+
+def make_physics() -> quadruped.Physics:
+    """dm_control's quadruped on a floor of half-width `FLOOR_SIZE`, without walls, ball or terrain."""
+    return quadruped.Physics.from_xml_string(quadruped.make_model(floor_size=FLOOR_SIZE), quadruped.common.ASSETS)
+
+
+class QuadrupedGoalBatch(MujocoBatch):
+    """`num_envs` copies of `QuadrupedGoal` on one `mujoco.batch.Batch`, reset together.
+
+    Reproduces dm_control's environment exactly:
+    - a control step is 4 `mj_step`s followed by the position and velocity stages at the new state
+      (`stage=mjSTAGE_VEL`), which is what dm_control's legacy `Physics.step` (mj_step2, mj_steps,
+      mj_step1) leaves in `mjData`: positions and velocity sensors current, acceleration sensors
+      (accelerometer, toe forces and torques) from the last substep;
+    - an MDP episode start draws each copy's yaw from its task's generator, then runs dm_control's
+      `_find_non_contacting_height` loop on a second batch of the model with actuation disabled
+      (dm_control's reset forwards so): every copy still in contact is forwarded at a height 1 cm up
+      (heights accumulated as dm_control adds them) until it has no contact; that batch's full forward
+      gives the first observation, and its state rows become the copies' states. (With all hinges at 0
+      and no activation the actuator forces vanish anyway; the flag keeps the match true by construction.)
+    """
+
+    def __init__(
+        self,
+        num_envs: int,
+        seed: SeedLike = None,
+        *,
+        num_threads: int = 0,
+        goal_radius: float = GOAL_RADIUS,
+        goal: np.ndarray | None = None,
+        episodes_per_task: int = 1,
+        episode_length: int = EPISODE_LENGTH,
+        privileged: bool = False,
+    ):
+        tasks = [
+            QuadrupedGoal(
+                goal_radius=goal_radius,
+                goal=goal,
+                episode_length=episode_length,
+                episodes_per_task=episodes_per_task,
+                privileged=privileged,
+                random=s,
+            )
+            for s in spawn_seeds(seed, num_envs)
+        ]
+        physics = make_physics()
+        model = physics.model.ptr
+        super().__init__(tasks, model, num_threads)
+        self.goal_radius = tasks[0].goal_radius
+        self._n_sub_steps = control.compute_n_steps(CONTROL_TIMESTEP, model.opt.timestep)
+        # The reset batch: dm_control forwards a reset state with actuation disabled.
+        reset_model = copy.copy(model)
+        reset_model.opt.disableflags |= mujoco.mjtDisableBit.mjDSBL_ACTUATION
+        self._reset_sim = mujoco.batch.Batch(reset_model, nsim=num_envs, nthread=num_threads)
+        self._reset_qpos = self._reset_sim.bind("qpos")
+        self._reset_ncon = self._reset_sim.bind("ncon")
+        self._act = self._sim.bind("act")
+        # Where observations are read: the reset batch's outputs right after a reset, else the batch's.
+        self._outputs = {
+            sim: (sim.bind("xpos"), sim.bind("xmat"), sim.bind("sensordata")) for sim in (self._sim, self._reset_sim)
+        }
+        self._source = self._sim
+
+        root = model.joint("root")
+        self._root = int(model.jnt_qposadr[root.id])
+        self._torso = model.body("torso").id
+        hinges = np.flatnonzero(model.jnt_type == mujoco.mjtJoint.mjJNT_HINGE)
+        self._hinge_qpos, self._hinge_qvel = model.jnt_qposadr[hinges], model.jnt_dofadr[hinges]
+
+        def sensor_columns(*types) -> np.ndarray:  # sensordata columns of these sensor types, by sensor id
+            ids = np.flatnonzero(np.isin(model.sensor_type, types))
+            return np.concatenate(
+                [np.arange(model.sensor_adr[i], model.sensor_adr[i] + model.sensor_dim[i]) for i in ids]
+            )
+
+        sensor = mujoco.mjtSensor
+        self._velocimeter = sensor_columns(sensor.mjSENS_VELOCIMETER)  # the model's one velocimeter
+        self._imu = sensor_columns(sensor.mjSENS_GYRO, sensor.mjSENS_ACCELEROMETER)
+        self._force_torque = sensor_columns(sensor.mjSENS_FORCE, sensor.mjSENS_TORQUE)
+
+    def _reset_mdp(self) -> None:
+        sim, qpos, root = self._reset_sim, self._reset_qpos, self._root
+        sim.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)
+        for i, task in enumerate(self._tasks):  # as QuadrupedGoal.initialize_mdp_episode, copy by copy
+            yaw = task.random.uniform(0.0, 2.0 * np.pi)
+            qpos[i, root + 3 : root + 7] = np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+        qpos[:, root : root + 2] = 0.0
+        z = np.zeros(self.num_envs)
+        active = np.arange(self.num_envs)
+        attempts = 0
+        while active.size:
+            qpos[active, root + 2] = z[active]
+            sim.forward(ids=active, stage=mujoco.mjtStage.mjSTAGE_POS)  # collisions: ncon
+            active = active[self._reset_ncon[active] > 0]
+            z[active] += HEIGHT_STEP
+            attempts += 1
+            if attempts > MAX_HEIGHT_ATTEMPTS:
+                raise RuntimeError("Failed to find a non-contacting configuration.")
+        sim.forward()  # the full forward of dm_control's reset, actuation disabled
+        self._sim.state[...] = sim.state
+        self._source = sim
+
+    def _transition(self, action: np.ndarray) -> np.ndarray:
+        self._ctrl[:] = action
+        self._sim.step(nstep=self._n_sub_steps, stage=mujoco.mjtStage.mjSTAGE_VEL)
+        self._source = self._sim
+        position = self._outputs[self._sim][0][:, self._torso, :2]
+        return (_norms(position - self._task) <= self.goal_radius).astype(np.float64)
+
+    def _mdp_observation(self) -> dict[str, np.ndarray]:
+        xpos, xmat, sensordata = self._outputs[self._source]
+        forward = xmat[:, self._torso, [0, 3]]  # the torso's x-axis in the world, (x, y)
+        return {
+            "egocentric_state": np.hstack(
+                (self._qpos[:, self._hinge_qpos], self._qvel[:, self._hinge_qvel], self._act)
+            ),
+            "torso_velocity": sensordata[:, self._velocimeter],
+            "torso_upright": xmat[:, self._torso, 8].copy(),
+            "imu": sensordata[:, self._imu],
+            "force_torque": np.arcsinh(sensordata[:, self._force_torque]),
+            "position": xpos[:, self._torso, :2].copy(),
+            "heading": forward / np.maximum(_norms(forward), 1e-9)[:, None],
+        }
 
 
 def goal_metrics(observations, rewards, tasks, **_) -> dict[str, np.ndarray]:
@@ -108,7 +246,7 @@ def goal_metrics(observations, rewards, tasks, **_) -> dict[str, np.ndarray]:
     }
 
 
-@register("quadruped_goal_sparse", metrics=goal_metrics, position_keys=("position",))
+@register("quadruped_goal_sparse", batch=QuadrupedGoalBatch, metrics=goal_metrics, position_keys=("position",))
 def quadruped_goal_sparse(
     seed: SeedLike = None,
     *,
@@ -119,7 +257,7 @@ def quadruped_goal_sparse(
     privileged: bool = False,
 ) -> control.Environment:
     """`quadruped_goal_sparse`: quadruped walking to a goal on a circle (see suite.quadruped_goal)."""
-    physics = quadruped.Physics.from_xml_string(quadruped.make_model(floor_size=FLOOR_SIZE), quadruped.common.ASSETS)
+    physics = make_physics()
     task = QuadrupedGoal(
         goal_radius=goal_radius,
         goal=goal,

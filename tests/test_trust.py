@@ -163,8 +163,10 @@ def test_encode_decode_is_exact_for_every_saved_kind_of_value():
 
 
 def test_loop_batch_snapshot_is_plain_data_and_restores_exactly():
-    """LoopBatch (tasks without a fast batch) snapshots its tasks' random generators by state."""
-    env = suite.batch("quadruped_goal_sparse", 2, seed=0, episode_length=5)
+    """LoopBatch (what batches tasks without a fast batch) snapshots its tasks' random generators by state."""
+    env = suite.LoopBatch(
+        [suite.load("quadruped_goal_sparse", seed=s, episode_length=5) for s in suite.spawn_seeds(0, 2)]
+    )
     env.reset()
     action = np.zeros((2, *env.action_spec().shape))
     for _ in range(3):
