@@ -125,13 +125,21 @@ def walk(position: np.ndarray, action: np.ndarray) -> np.ndarray:
     return np.clip(position + STEP_SIZE * np.clip(action, -1.0, 1.0), -ARENA, ARENA)
 
 
+def _distance(a: np.ndarray, b) -> np.ndarray:
+    """Euclidean distance over the last axis (size 2) of broadcast `a` and `b`."""
+    d = np.asarray(a) - b
+    return np.hypot(d[..., 0], d[..., 1])
+
+
 def treasure_reward(position: np.ndarray, treasure: np.ndarray, rewards: TreasureRewards, sparse: bool = True):
     """Reward of ending a step at `position` (..., 2) when the treasure is at `treasure` (..., 2); broadcasts."""
-    position, treasure = np.asarray(position), np.asarray(treasure)
-    to_treasure = np.linalg.norm(position - treasure, axis=-1)
+    to_treasure = _distance(position, treasure)
     if not sparse:
         return -to_treasure
-    to_top = np.linalg.norm(position, axis=-1)
+    return _sparse_reward(_distance(position, 0.0), to_treasure, rewards)
+
+
+def _sparse_reward(to_top: np.ndarray, to_treasure: np.ndarray, rewards: TreasureRewards) -> np.ndarray:
     climb = rewards.mountain_height * (to_top - MOUNTAIN_RADIUS) - rewards.step_penalty
     away = -rewards.step_penalty * np.maximum(1.0, to_top)
     return np.where(
@@ -141,7 +149,7 @@ def treasure_reward(position: np.ndarray, treasure: np.ndarray, rewards: Treasur
 
 def on_top(position: np.ndarray) -> np.ndarray:
     """Whether steps ending at `position` (..., 2) read the map."""
-    return np.linalg.norm(position, axis=-1) < TOP_RADIUS
+    return _distance(position, 0.0) < TOP_RADIUS
 
 
 def treasure_map(position: np.ndarray, treasure: np.ndarray) -> np.ndarray:
@@ -161,11 +169,17 @@ def belief_update(
     """Exact Bayes update of beliefs (N, K) over `support` (K, 2) after steps ending at `position` (N, 2)
     with `reward` (N,) and observation `seen_map` (N, 2). Reward and map are deterministic given the
     treasure, so the likelihood is 1 where a candidate would have given exactly what was observed."""
-    predicted = treasure_reward(position[:, None, :], support[None], rewards, sparse)  # (N, K)
+    return _belief_update(belief, support, position, _distance(position, 0.0), reward, seen_map, rewards, sparse)
+
+
+def _belief_update(belief, support, position, to_top, reward, seen_map, rewards, sparse) -> np.ndarray:
+    to_candidates = _distance(position[:, None, :], support[None])  # (N, K)
+    predicted = _sparse_reward(to_top[:, None], to_candidates, rewards) if sparse else -to_candidates
     likely = np.abs(predicted - reward[:, None]) <= 1e-9
-    read = on_top(position)  # (N,)
-    matches_map = np.all(np.abs(support[None] - seen_map[:, None, :]) <= 1e-9, axis=-1)  # (N, K)
-    likely &= ~read[:, None] | matches_map
+    read = to_top < TOP_RADIUS  # (N,): the map was read
+    if read.any():
+        matches_map = (np.abs(support[None] - seen_map[:, None, :]) <= 1e-9).all(axis=-1)  # (N, K)
+        likely &= ~read[:, None] | matches_map
     posterior = belief * likely
     return posterior / posterior.sum(axis=1, keepdims=True)
 
@@ -273,23 +287,32 @@ class MountainTreasureBatch(MujocoBatch):
         super().__init__(tasks, mujoco.MjModel.from_xml_string(MODEL_XML), num_threads)
         self.sparse, self.rewards = tasks[0].sparse, tasks[0].rewards
         self._support = tasks[0].prior.support()
+        self._map = np.zeros((num_envs, 2))  # the `treasure_map` observation, computed with the step
+
+    def _transition(self, action: np.ndarray) -> np.ndarray:
+        # The task's functions, each distance computed once (the step dominates this batch's time); the
+        # action is already clipped, so this is `walk`.
+        position = np.clip(self._qpos[:, :2] + STEP_SIZE * action, -ARENA, ARENA)
+        self._qpos[:] = position
+        to_top, to_treasure = _distance(position, 0.0), _distance(position, self._task)
+        reward = _sparse_reward(to_top, to_treasure, self.rewards) if self.sparse else -to_treasure
+        self._map = np.where((to_top < TOP_RADIUS)[:, None], self._task, 0.0)
+        if self._belief is not None:
+            self._belief = _belief_update(
+                self._belief, self._support, position, to_top, reward, self._map, self.rewards, self.sparse
+            )
+        return reward
 
     def _reset_mdp(self) -> None:
         self._qpos[:] = START
         self._qvel[:] = 0.0
-
-    def _transition(self, action: np.ndarray) -> np.ndarray:
-        position = walk(self._qpos[:, :2], action)
-        self._qpos[:] = position
-        reward = treasure_reward(position, self._task, self.rewards, self.sparse)
-        if self._belief is not None:
-            seen = treasure_map(position, self._task)
-            self._belief = belief_update(self._belief, self._support, position, reward, seen, self.rewards, self.sparse)
-        return reward
+        self._map = treasure_map(self._qpos[:, :2], self._task)
 
     def _mdp_observation(self) -> dict[str, np.ndarray]:
-        position = self._qpos[:, :2].copy()
-        return {"position": position, "treasure_map": treasure_map(position, self._task)}
+        return {"position": self._qpos[:, :2].copy(), "treasure_map": self._map.copy()}
+
+    def _load_extra_state(self, state: dict) -> None:
+        self._map = treasure_map(self._qpos[:, :2], self._task)
 
 
 def treasure_metrics(observations: dict[str, np.ndarray], rewards: np.ndarray, tasks: np.ndarray, **_) -> dict:
@@ -299,7 +322,7 @@ def treasure_metrics(observations: dict[str, np.ndarray], rewards: np.ndarray, t
     NaN if either never happens)."""
     position = observations["position"]  # (T, M, 2)
     top = on_top(position)
-    at_treasure = np.linalg.norm(position - np.asarray(tasks)[None], axis=-1) <= TREASURE_RADIUS
+    at_treasure = _distance(position, np.asarray(tasks)[None]) <= TREASURE_RADIUS
     reached_top, found = top.any(axis=0), at_treasure.any(axis=0)
     first_top = np.where(reached_top, top.argmax(axis=0) + 1.0, np.nan)
     after = np.full(position.shape[1], np.nan)

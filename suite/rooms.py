@@ -149,30 +149,44 @@ def cell_of(position: np.ndarray) -> np.ndarray:
     return np.round(np.asarray(position) / CELL).astype(np.int64)
 
 
+CODE_BASE = 64  # cells are coded as one integer, i · CODE_BASE + j, for fast comparisons
+
+
+def cell_code(position: np.ndarray) -> np.ndarray:
+    """One integer per position (...,), equal exactly when two positions lie in the same cell."""
+    cell = cell_of(position)
+    return cell[..., 0] * CODE_BASE + cell[..., 1]
+
+
+def goal_codes(goals: np.ndarray) -> np.ndarray:
+    """The cell codes (..., 3) of tasks (..., 6): goal 1, goal 2, goal 3."""
+    goals = np.asarray(goals)
+    return cell_code(goals.reshape(*goals.shape[:-1], 3, 2))
+
+
 def stage_reward(
-    cell: np.ndarray, goals: np.ndarray, reached: np.ndarray, rewards=GOAL_REWARDS, penalty: float = STEP_PENALTY
+    code: np.ndarray, goals: np.ndarray, reached: np.ndarray, rewards=GOAL_REWARDS, penalty: float = STEP_PENALTY
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Reward of ending a step in `cell` (..., 2) when the goals are `goals` (..., 6) in metres and the
-    stages reached so far in this MDP episode are `reached` (..., 3) bools; broadcasts. Returns the
-    reward (...) and the stages reached after the step."""
-    goal_cells = cell_of(np.asarray(goals).reshape(*np.shape(goals)[:-1], 3, 2))  # (..., 3, 2)
-    on = np.all(np.asarray(cell)[..., None, :] == goal_cells, axis=-1)  # (..., 3)
+    """Reward of ending a step in the cell coded `code` (...) when the goals' cells are coded `goals`
+    (..., 3) (`goal_codes`) and the stages reached so far in this MDP episode are `reached` (..., 3)
+    bools; broadcasts. Returns the reward (...) and the stages reached after the step."""
+    on = np.asarray(goals) == np.asarray(code)[..., None]
     first = on[..., 0]
     second = ~first & reached[..., 0] & on[..., 1]
     third = ~first & ~second & reached[..., 1] & on[..., 2]
-    reward = np.select([first, second, third], list(rewards), -penalty)
+    reward = np.where(first, rewards[0], np.where(second, rewards[1], np.where(third, rewards[2], -penalty)))
     return reward, reached | np.stack([first, second, third], axis=-1)
 
 
 def belief_update(
-    belief: np.ndarray, support: np.ndarray, cell: np.ndarray, reached: np.ndarray, reward: np.ndarray
+    belief: np.ndarray, support_codes: np.ndarray, code: np.ndarray, reached: np.ndarray, reward: np.ndarray
 ) -> np.ndarray:
-    """Exact Bayes update of beliefs (N, 48) over `support` after steps ending in `cell` (N, 2) with
-    `reward` (N,), `reached` (N, 3) the stages reached before the step. Every candidate still possible
-    has reached the same stages as the true task (a stage is reached exactly when its reward was seen),
-    and rewards are deterministic given the task: the likelihood is 1 where a candidate would have paid
-    exactly this reward and 0 elsewhere."""
-    predicted, _ = stage_reward(cell[:, None, :], support[None], reached[:, None, :])  # (N, 48)
+    """Exact Bayes update of beliefs (N, 48) over the tasks coded `support_codes` (48, 3) after steps
+    ending in cells coded `code` (N,) with `reward` (N,), `reached` (N, 3) the stages reached before the
+    step. Every candidate still possible has reached the same stages as the true task (a stage is
+    reached exactly when its reward was seen), and rewards are deterministic given the task: the
+    likelihood is 1 where a candidate would have paid exactly this reward and 0 elsewhere."""
+    predicted, _ = stage_reward(code[:, None], support_codes[None], reached[:, None, :])  # (N, 48)
     posterior = belief * (np.abs(predicted - reward[:, None]) <= 1e-9)
     return posterior / posterior.sum(axis=1, keepdims=True)
 
@@ -189,6 +203,7 @@ class Rooms(MetaTask):
 
     def __init__(self, *, goals: np.ndarray | None = None, **kwargs):
         self._support = task_support()  # set first: force_task checks tasks against it
+        self._support_codes = goal_codes(self._support)
         super().__init__(RoomsPrior(), task=goals, **kwargs)
         self._reached = np.zeros(3, bool)
         self._action_spec = None
@@ -239,12 +254,10 @@ class Rooms(MetaTask):
         physics.set_control(np.clip(check_action(action, spec), spec.minimum, spec.maximum))
 
     def transition_reward(self, physics: Physics) -> float:
-        cell = cell_of(physics.robot_position())
-        reward, reached = stage_reward(cell, self._task, self._reached)
-        self._belief = belief_update(self._belief[None], self._support, cell[None], self._reached[None], reward[None])[
-            0
-        ]
-        self._reached = reached
+        code = cell_code(physics.robot_position())
+        reward, reached = stage_reward(code, goal_codes(self._task), self._reached)
+        belief = belief_update(self._belief[None], self._support_codes, code[None], self._reached[None], reward[None])
+        self._belief, self._reached = belief[0], reached
         return float(reward)
 
     def mdp_observation(self, physics: Physics) -> collections.OrderedDict:
@@ -260,19 +273,21 @@ class RoomsBatch(MujocoBatch):
     def __init__(self, num_envs: int, seed: SeedLike = None, *, num_threads: int = 0, **task_kwargs):
         tasks = [Rooms(random=s, **task_kwargs) for s in spawn_seeds(seed, num_envs)]
         super().__init__(tasks, mujoco.MjModel.from_xml_string(MODEL_XML), num_threads)
-        self._support = task_support()
+        self._support_codes = goal_codes(task_support())
         self._reached = np.zeros((num_envs, 3), bool)
+        self._goal_codes = np.zeros((num_envs, 3), np.int64)
 
     def _reset_mdp(self) -> None:
         self._sim.reset(stage=mujoco.mjtStage.mjSTAGE_NONE)  # qpos0 = 0 (the middle room's centre), at rest
         self._reached = np.zeros((self.num_envs, 3), bool)
+        self._goal_codes = goal_codes(self._task)  # the task is fixed until the next reset
 
     def _transition(self, action: np.ndarray) -> np.ndarray:
         self._ctrl[:] = action
         self._sim.step(nstep=N_SUB_STEPS)
-        cell = cell_of(self._qpos[:, :2])
-        reward, reached = stage_reward(cell, self._task, self._reached)
-        self._belief = belief_update(self._belief, self._support, cell, self._reached, reward)
+        code = cell_code(self._qpos[:, :2])
+        reward, reached = stage_reward(code, self._goal_codes, self._reached)
+        self._belief = belief_update(self._belief, self._support_codes, code, self._reached, reward)
         self._reached = reached
         return reward
 
@@ -284,21 +299,22 @@ class RoomsBatch(MujocoBatch):
 
     def _load_extra_state(self, state: dict) -> None:
         self._reached = state["reached"].copy()
+        self._goal_codes = goal_codes(self._task)
 
 
 def rooms_metrics(observations: dict[str, np.ndarray], rewards: np.ndarray, tasks: np.ndarray, **_) -> dict:
     """Deployed-exploration metrics of M deployments, one value each: `goals_reached` (0–3, the most
     stages reached in one MDP episode) and `first_goal_<k>_step` (1-based BAMDP step at which goal k was
     first reached in order, NaN if never), recomputed from the positions."""
-    cells = cell_of(observations["position"])  # (T, M, 2)
+    codes = cell_code(observations["position"])  # (T, M)
     episode = observations["inner_episode"][..., 0]  # (T, M): the MDP episode each step ended in
-    tasks = np.asarray(tasks)
-    steps, m = cells.shape[:2]
+    goals = goal_codes(tasks)  # (M, 3)
+    steps, m = codes.shape
     reached = np.zeros((m, 3), bool)
     first = np.full((m, 3), np.nan)
     most = np.zeros(m)
     for t in range(steps):
-        _, reached = stage_reward(cells[t], tasks, reached)
+        _, reached = stage_reward(codes[t], goals, reached)
         first = np.where(reached & np.isnan(first), t + 1.0, first)
         most = np.maximum(most, reached.sum(axis=1))
         if t + 1 < steps:  # the step ending an MDP episode shows the next one's first observation

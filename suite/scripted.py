@@ -1,14 +1,23 @@
-"""Open-loop scripted cheetah gaits: a baseline that leaves the zone without any learning.
+"""Scripted strategies: baselines that need no learning, and bounds on what a task's best agent earns.
 
-The gaits were found by random search over sinusoid parameters (see `bench/suite_speed.py` for the
-batch they ran on); they carry the cheetah about 15-19 m in one 200-step episode from most initial
-poses, backward more reliably than forward. Used by the demo and the tests.
+- Cheetah: open-loop sinusoid gaits, found by random search over their parameters; they carry the
+  cheetah about 15-19 m in one 200-step episode from most initial poses, backward more reliably than
+  forward. Used by the demo and the tests.
+- Mountain Treasure: `MountainClimber` (climb, read the map, walk straight to the treasure: the
+  Bayes-optimal strategy's shape) and `CircleWalker` (walk the circle until the treasure pays: what a
+  meta-learner that does not explore does).
+- Rooms: `RoomsExplorer` visits the candidate corners of each stage in a fixed order until the stage
+  pays, then the next stage's, then stays on goal 3.
+
+A strategy is called with each step's observation and reward (`act(observation, reward)`) and
+`reset()` at every BAMDP episode start; `rollout(env, strategy)` runs one BAMDP episode.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from hyperstate.suite import mountain_treasure, rooms
 from hyperstate.suite.cheetah_dir import BACKWARD, CONTROL_TIMESTEP, FORWARD
 
 
@@ -35,3 +44,119 @@ GAITS = {
 def gait(direction: float) -> SinusoidGait:
     """The scripted gait running in `direction` (+1 forward, -1 backward)."""
     return GAITS[float(direction)]
+
+
+def rollout(env, strategy) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """One BAMDP episode of `strategy` on dm_control environment `env`: its rewards (T,) and the
+    observations each step ended in, stacked ({key: (T, ...)})."""
+    strategy.reset()
+    step = env.reset()
+    rewards, observations = [], []
+    reward = 0.0
+    while not step.last():
+        step = env.step(strategy.act(step.observation, reward))
+        reward = float(step.reward)
+        rewards.append(reward)
+        observations.append(step.observation)
+    return np.array(rewards), {k: np.stack([o[k] for o in observations]) for k in observations[0]}
+
+
+def _toward(position: np.ndarray, target: np.ndarray, step_size: float) -> np.ndarray:
+    """The action of a single-integrator walker heading straight for `target` (arriving, not overshooting)."""
+    move = (np.asarray(target) - position) / step_size
+    return move / max(1.0, float(np.abs(move).max()))
+
+
+class MountainClimber:
+    """Mountain Treasure: up to the top, read the map, straight to the treasure, stay there."""
+
+    def reset(self) -> None:
+        self.treasure = None
+
+    def act(self, observation: dict, reward: float) -> np.ndarray:
+        if np.any(observation["treasure_map"] != 0):
+            self.treasure = observation["treasure_map"].copy()
+        target = np.zeros(2) if self.treasure is None else self.treasure
+        return _toward(observation["position"], target, mountain_treasure.STEP_SIZE)
+
+
+class CircleWalker:
+    """Mountain Treasure: along the treasure circle (counter-clockwise) until the treasure pays, then stay."""
+
+    def reset(self) -> None:
+        self.found = None
+
+    def act(self, observation: dict, reward: float) -> np.ndarray:
+        position = observation["position"]
+        if reward > 0 and self.found is None:
+            self.found = position.copy()
+        if self.found is not None:
+            return _toward(position, self.found, mountain_treasure.STEP_SIZE)
+        radius = max(float(np.linalg.norm(position)), 1e-9)
+        angle = np.arctan2(position[1], position[0]) + 0.1 / mountain_treasure.TREASURE_DISTANCE
+        ahead = mountain_treasure.TREASURE_DISTANCE * np.array([np.cos(angle), np.sin(angle)])
+        return _toward(position, ahead if radius > 0.5 else position / radius, mountain_treasure.STEP_SIZE)
+
+
+class RoomsExplorer:
+    """Rooms: tries the candidate corners of goal 1, then of goal 2 (in the room on goal 1's side), then
+    of goal 3 (the middle room's others), each stage until it pays; stays on goal 3. Moves through
+    waypoints with a damped proportional controller; the corridor is entered and left at its ends."""
+
+    GAIN, DAMPING, TOLERANCE = 8.0, 0.8, 0.06
+
+    def reset(self) -> None:
+        self.stage = 0
+        self.goals: list[np.ndarray] = []
+        self.tried: set[tuple[int, int]] = set()
+        self.route: list[np.ndarray] = []
+
+    def _route_to(self, position: np.ndarray, target: np.ndarray) -> list[np.ndarray]:
+        here, there = rooms.cell_of(position), rooms.cell_of(target)
+        room = lambda cell: int(np.sign(cell[0])) if abs(cell[0]) > rooms.HALF else 0  # noqa: E731
+        if room(here) == room(there):
+            return [target]
+        side = room(there) or room(here)
+        near, far = (
+            rooms.CELL * np.array([side * rooms.HALF, 0]),
+            rooms.CELL * np.array([side * (rooms.SIDE_CENTRE - rooms.HALF), 0]),
+        )
+        door = [near, far] if room(there) else [far, near]
+        return [*door, target]
+
+    def _next_target(self, position: np.ndarray) -> np.ndarray | None:
+        if self.stage == 3:
+            return self.goals[2]
+        if self.stage == 0:
+            corners = rooms.MIDDLE_CORNERS
+        elif self.stage == 1:
+            corners = rooms.LEFT_CORNERS if self.goals[0][0] < 0 else rooms.RIGHT_CORNERS
+        else:
+            goal_1 = tuple(rooms.cell_of(self.goals[0]))
+            corners = [c for c in rooms.MIDDLE_CORNERS if c != goal_1]
+        left = [c for c in corners if c not in self.tried]
+        if not left:
+            return None
+        here = rooms.cell_of(position)
+        closest = min(left, key=lambda c: abs(c[0] - here[0]) + abs(c[1] - here[1]))
+        return rooms.CELL * np.array(closest, dtype=np.float64)
+
+    def act(self, observation: dict, reward: float) -> np.ndarray:
+        position, velocity = observation["position"], observation["velocity"]
+        cell = tuple(int(v) for v in rooms.cell_of(position))
+        if reward in rooms.GOAL_REWARDS[self.stage : self.stage + 1]:
+            self.goals.append(position.copy())
+            self.stage += 1
+            self.tried, self.route = set(), []
+        elif self.stage < 3 and cell in (*rooms.MIDDLE_CORNERS, *rooms.LEFT_CORNERS, *rooms.RIGHT_CORNERS):
+            if self.route and np.array_equal(rooms.cell_of(self.route[-1]), cell):
+                self.tried.add(cell)
+                self.route = []
+        if self.route and np.linalg.norm(self.route[0] - position) < self.TOLERANCE and len(self.route) > 1:
+            self.route.pop(0)
+        if not self.route:
+            target = self._next_target(position)
+            if target is None:
+                return np.zeros(2)
+            self.route = self._route_to(position, target)
+        return np.clip(self.GAIN * (self.route[0] - position) - self.DAMPING * velocity, -1.0, 1.0)

@@ -38,6 +38,20 @@ def test_step_path_probe_finds_the_function_and_module_paths_identical(tmp_path)
     assert result["frames_per_rollout"] == 4 * 200
 
 
+def test_suite_speed_compares_each_task_with_raw_mujoco_of_its_model(tmp_path):
+    tasks = ["mountain_treasure_k8_sparse", "quadruped_goal_sparse"]
+    result = bench(
+        "suite_speed.py", "--tasks", *tasks, "--steps", 96, "--num-envs", 2, "--threads", 1, out=tmp_path / "s.json"
+    )
+    assert list(result["tasks"]) == tasks and result["num_envs"] == 2 and result["threads"] == 1
+    mountain, quadruped = (result["tasks"][t] for t in tasks)
+    # The substeps are the dm_control environments' own: 1 for the kinematic walker, 0.02 s / 0.005 s.
+    assert mountain["substeps_per_control_step"] == 1 and quadruped["substeps_per_control_step"] == 4
+    for row in (mountain, quadruped):
+        assert row["fast_batch"] is True and min(row["raw_mujoco_batch"], row["suite_batch"]) > 0
+        assert row["ratio"] == pytest.approx(row["suite_batch"] / row["raw_mujoco_batch"], rel=0.02)
+
+
 def test_throughput_reports_phases_and_loop_physics(tmp_path):
     result = bench("throughput.py", "--preset", "oracle", "--num-envs", 4, "--frames", 1600, out=tmp_path / "tp.json")
     assert result["frames"] == 1600

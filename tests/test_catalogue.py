@@ -126,7 +126,9 @@ def test_batch_equals_dm_control_step_for_step(name):
     assert vec.observation_spec() == {k: v for k, v in envs[0].observation_spec().items()}
 
 
-@pytest.mark.parametrize("name", ["point_treasure_sparse", "cheetah_vel_sparse"])
+@pytest.mark.parametrize(
+    "name", ["point_treasure_sparse", "cheetah_vel_sparse", "mountain_treasure_k8_sparse", "rooms_sparse"]
+)
 def test_batch_snapshot_restores_exactly(name):
     vec = suite.batch(name, 2, seed=0, privileged=True, episode_length=10)
     vec.reset()
