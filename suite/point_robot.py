@@ -11,6 +11,8 @@ step within `goal_radius` (0.2 m) of g, else 0; dense (`point_robot`): −‖p �
 Exact belief (finite prior only): the prior restricted to the goals whose reward at every visited
 position equals the observed one, renormalised — e.g. one rewarded step leaves only the goals within
 0.2 m of it, an unrewarded step removes them.
+`point_robot_sparse` has the HyperX reference's horizon: 3 MDP episodes of 100 steps per task, so that
+what the first episode finds pays in the next two (`episodes_per_task=1` for a single episode).
 `point_treasure_sparse`: 4 candidate goals and 2 MDP episodes of 50 steps per task, so exploring the
 candidates in episode 1 pays off in episode 2 (the task stays, the robot is reset).
 """
@@ -38,6 +40,7 @@ GOAL_DISTANCE = 1.0  # radius of the half circle of goals (m)
 GOAL_RADIUS = 0.2  # the sparse reward is paid within this distance of the goal (m)
 ARENA = 1.5  # the slide joints are limited to ±ARENA (m)
 TREASURE_GOALS, TREASURE_EPISODE_LENGTH, TREASURE_EPISODES = 4, 50, 2
+SPARSE_EPISODES = 3  # MDP episodes per task of point_robot_sparse: the HyperX reference's SparsePointEnv
 
 MODEL_XML = f"""
 <mujoco model="point_robot">
@@ -319,7 +322,7 @@ _register(
     sparse=True,
     num_goals=None,
     episode_length=EPISODE_LENGTH,
-    episodes_per_task=1,
+    episodes_per_task=SPARSE_EPISODES,
     reference_task="point_robot",  # same observations and prior, dense reward
 )
 _register("point_robot", sparse=False, num_goals=None, episode_length=EPISODE_LENGTH, episodes_per_task=1)

@@ -1,6 +1,7 @@
 """Quadruped-goal meta-task: dm_control's quadruped must walk to an unknown goal, rewarded only near it.
 
-Task prior: goal g on a circle of radius 2 m around the start, angle ~ Uniform[0, 2π).
+Task prior: goal g on a circle of radius 2 m around the start, angle ~ Uniform[0, 2π)
+(`goal_region="disc"`: uniform in the disc of radius `goal_distance` instead).
 Reward per control step (0.02 s): 1 if the torso's horizontal position ends the step within
 `goal_radius` (0.5 m) of g, else 0; no control cost (as dm_control's quadruped tasks).
 Every MDP episode starts upright at the origin with a random heading, at the lowest height without
@@ -8,6 +9,10 @@ contacts (dm_control's quadruped initialisation with the orientation restricted 
 Observations: dm_control's quadruped observations plus `position`, the torso's (x, y) from the start
 and `heading` (cos, sin of the torso's yaw), which a navigator needs. No exact belief is exposed: after
 an unrewarded step the posterior over the angle is the prior minus an arc, not a fixed-size vector.
+`quadruped_antgoal_sparse` is the HyperX reference's sparse AntGoal setting on this quadruped: goals
+uniform in the disc of radius 3 m, rewarded within 0.75 m, 6 MDP episodes of 10 s per task. (The
+reference pays 1 − distance inside the radius and −0.75 outside, minus control and contact costs, to
+an ant; here the reward stays the suite's 1 inside and 0 outside.)
 Fast batch: `QuadrupedGoalBatch` (one `mujoco.batch.Batch`), step for step equal to the dm_control
 environment, initial-height search and first observation after a reset included.
 """
@@ -16,6 +21,7 @@ from __future__ import annotations
 
 import collections
 import copy
+from typing import Literal
 
 import mujoco
 import mujoco.batch
@@ -58,13 +64,47 @@ class CircleGoalPrior:
         return None
 
 
-class QuadrupedGoal(MetaTask):
-    """A meta-task where the quadruped must find a goal on a circle; see the module docstring."""
+class DiscGoalPrior:
+    """Goals uniform in the disc of radius `distance` around the start (angle first, then radius)."""
 
-    def __init__(self, *, goal_radius: float = GOAL_RADIUS, goal: np.ndarray | None = None, **kwargs):
+    def __init__(self, distance: float):
+        self.distance = float(distance)
+
+    def sample(self, rng: np.random.Generator) -> np.ndarray:
+        angle = rng.uniform(0.0, 2.0 * np.pi)
+        radius = self.distance * np.sqrt(rng.uniform(0.0, 1.0))
+        return radius * np.array([np.cos(angle), np.sin(angle)])
+
+    def support(self) -> None:
+        return None
+
+
+GOAL_PRIORS = {"circle": CircleGoalPrior, "disc": DiscGoalPrior}
+
+
+def goal_prior(region: Literal["circle", "disc"], distance: float) -> CircleGoalPrior | DiscGoalPrior:
+    """The goal prior `region` of radius `distance` (m)."""
+    if region not in GOAL_PRIORS:
+        raise ValueError(f"goal_region must be one of {', '.join(GOAL_PRIORS)}, got {region!r}")
+    if not distance > 0:
+        raise ValueError(f"goal_distance must be > 0, got {distance}")
+    return GOAL_PRIORS[region](distance)
+
+
+class QuadrupedGoal(MetaTask):
+    """A meta-task where the quadruped must find a goal on a circle (or in a disc); see the module docstring."""
+
+    def __init__(
+        self,
+        *,
+        goal_radius: float = GOAL_RADIUS,
+        goal: np.ndarray | None = None,
+        prior: CircleGoalPrior | DiscGoalPrior | None = None,
+        **kwargs,
+    ):
         if goal_radius <= 0:
             raise ValueError(f"goal_radius must be > 0, got {goal_radius}")
-        super().__init__(CircleGoalPrior(), task=goal, **kwargs)
+        super().__init__(prior or CircleGoalPrior(), task=goal, **kwargs)
         self.goal_radius = float(goal_radius)
         self._action_spec = None
 
@@ -139,14 +179,18 @@ class QuadrupedGoalBatch(MujocoBatch):
         num_threads: int = 0,
         goal_radius: float = GOAL_RADIUS,
         goal: np.ndarray | None = None,
+        goal_region: Literal["circle", "disc"] = "circle",
+        goal_distance: float = GOAL_DISTANCE,
         episodes_per_task: int = 1,
         episode_length: int = EPISODE_LENGTH,
         privileged: bool = False,
     ):
+        prior = goal_prior(goal_region, goal_distance)
         tasks = [
             QuadrupedGoal(
                 goal_radius=goal_radius,
                 goal=goal,
+                prior=prior,
                 episode_length=episode_length,
                 episodes_per_task=episodes_per_task,
                 privileged=privileged,
@@ -246,24 +290,54 @@ def goal_metrics(observations, rewards, tasks, **_) -> dict[str, np.ndarray]:
     }
 
 
-@register("quadruped_goal_sparse", batch=QuadrupedGoalBatch, metrics=goal_metrics, position_keys=("position",))
-def quadruped_goal_sparse(
-    seed: SeedLike = None,
-    *,
-    goal_radius: float = GOAL_RADIUS,
-    goal: np.ndarray | None = None,
-    episodes_per_task: int = 1,
-    episode_length: int = EPISODE_LENGTH,
-    privileged: bool = False,
-) -> control.Environment:
-    """`quadruped_goal_sparse`: quadruped walking to a goal on a circle (see suite.quadruped_goal)."""
-    physics = make_physics()
-    task = QuadrupedGoal(
-        goal_radius=goal_radius,
-        goal=goal,
-        episode_length=episode_length,
-        episodes_per_task=episodes_per_task,
-        privileged=privileged,
-        random=seed,
-    )
-    return control.Environment(physics, task, control_timestep=CONTROL_TIMESTEP)
+def _register(name: str, *, region: str, distance: float, radius: float, episodes: int) -> None:
+    def factory(
+        seed: SeedLike = None,
+        *,
+        goal_radius: float = radius,
+        goal: np.ndarray | None = None,
+        goal_region: Literal["circle", "disc"] = region,
+        goal_distance: float = distance,
+        episodes_per_task: int = episodes,
+        episode_length: int = EPISODE_LENGTH,
+        privileged: bool = False,
+    ) -> control.Environment:
+        task = QuadrupedGoal(
+            goal_radius=goal_radius,
+            goal=goal,
+            prior=goal_prior(goal_region, goal_distance),
+            episode_length=episode_length,
+            episodes_per_task=episodes_per_task,
+            privileged=privileged,
+            random=seed,
+        )
+        return control.Environment(make_physics(), task, control_timestep=CONTROL_TIMESTEP)
+
+    def batch_factory(
+        num_envs: int,
+        seed: SeedLike = None,
+        *,
+        goal_radius: float = radius,
+        goal_region: Literal["circle", "disc"] = region,
+        goal_distance: float = distance,
+        episodes_per_task: int = episodes,
+        **kwargs,
+    ) -> QuadrupedGoalBatch:
+        return QuadrupedGoalBatch(
+            num_envs,
+            seed,
+            goal_radius=goal_radius,
+            goal_region=goal_region,
+            goal_distance=goal_distance,
+            episodes_per_task=episodes_per_task,
+            **kwargs,
+        )
+
+    factory.__name__ = factory.__qualname__ = name
+    factory.__doc__ = f"`{name}`: quadruped walking to a goal it must find (see suite.quadruped_goal)."
+    register(name, batch=batch_factory, metrics=goal_metrics, position_keys=("position",))(factory)
+
+
+_register("quadruped_goal_sparse", region="circle", distance=GOAL_DISTANCE, radius=GOAL_RADIUS, episodes=1)
+# The HyperX reference's sparse AntGoal: goals in a 3 m disc, 0.75 m radius, 6 MDP episodes per task.
+_register("quadruped_antgoal_sparse", region="disc", distance=3.0, radius=0.75, episodes=6)

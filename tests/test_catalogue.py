@@ -160,7 +160,7 @@ def drive_to(env, target, max_steps=60):
 
 @pytest.mark.parametrize("name", ["point_robot_sparse", "point_robot"])
 def test_point_robot_reward_recomputed_from_physics(name):
-    env = suite.load(name, seed=7, privileged=True)
+    env = suite.load(name, seed=7, privileged=True, episodes_per_task=1)  # no physics reset after step 100
     goal = env.reset().observation["task"]
     assert np.linalg.norm(goal) == pytest.approx(1.0) and goal[1] >= 0.0  # on the upper half circle
     rng = np.random.default_rng(0)
@@ -340,6 +340,30 @@ def test_quadruped_goal_prior_on_circle_and_random_headings():
         headings.append(obs["heading"])
     np.testing.assert_allclose(np.linalg.norm(headings, axis=1), 1.0, atol=1e-6)
     assert np.ptp(np.arctan2(*np.array(headings).T[::-1])) > 1.0
+
+
+def test_hyperx_horizons_and_the_antgoal_variant():
+    """The HyperX reference's settings: sparse point robot 100 steps × 3 MDP episodes, cheetah-dir 200 × 1,
+    AntGoal's goals uniform in a 3 m disc, rewarded within 0.75 m, 6 MDP episodes of 10 s."""
+    for name, horizon in (("point_robot_sparse", (100, 3)), ("cheetah_dir_sparse", (200, 1))):
+        task = suite.load(name, seed=0).task
+        assert (task.episode_length, task.episodes_per_task) == horizon
+    env = suite.load("quadruped_antgoal_sparse", seed=0, privileged=True)
+    assert (env.task.episode_length, env.task.episodes_per_task, env.task.goal_radius) == (500, 6, 0.75)
+    assert env.control_timestep() * env.task.episode_length == pytest.approx(10.0)
+    rng = np.random.default_rng(0)
+    goals = np.array([env.task.prior.sample(rng) for _ in range(4000)])
+    radii = np.linalg.norm(goals, axis=1)
+    assert radii.max() <= 3.0 and np.mean(radii <= 1.5) == pytest.approx(0.25, abs=0.03)  # uniform in area
+    # The batch draws the same goals as the environments.
+    vec = suite.batch("quadruped_antgoal_sparse", 2, seed=4, privileged=True, episode_length=5)
+    first = vec.reset().observation["task"]
+    for i, s in enumerate(suite.spawn_seeds(4, 2)):
+        np.testing.assert_array_equal(
+            suite.load("quadruped_antgoal_sparse", seed=s, privileged=True).reset().observation["task"], first[i]
+        )
+    with pytest.raises(ValueError, match="goal_region must be one of circle, disc"):
+        suite.load("quadruped_goal_sparse", goal_region="square")
 
 
 # Learning on an easy setting -----------------------------------------------------------------------

@@ -7,6 +7,7 @@ import pytest
 from hyperstate import suite
 from hyperstate.evaluation import report
 from hyperstate.suite import mountain_treasure as mt
+from hyperstate.suite import scripted
 
 K8 = "mountain_treasure_k8_sparse"
 
@@ -36,6 +37,7 @@ def run(env, actions):
 def test_motion_reward_and_map_are_the_references():
     env = suite.load("mountain_treasure_sparse", seed=5, privileged=True)
     rng = np.random.default_rng(0)
+
     # A walk that crosses the mountain, the circle and the arena's border; actions beyond ±1 are clipped.
     def drift(t):  # up across the mountain to the border, then right along it; beyond ±1 is clipped
         return rng.uniform(-0.6, 0.6, 2) + ((0.0, 1.0) if t < 40 else (1.0, 0.0))
@@ -59,24 +61,43 @@ def test_motion_reward_and_map_are_the_references():
     assert r_small == pytest.approx([reference_reward(p, small.task.task_parameters, 1.0, -1.0) for p in p_small])
 
 
-def climb_then_walk():
-    """The Bayes-optimal strategy: up to the top, read the map, straight to the treasure, stay."""
-    memory = {}
+class _Strategy:
+    """A scripted strategy as `run`'s `actions(step, observation)` (reward unused by the climber)."""
 
-    def act(t, obs):
-        if np.any(obs["treasure_map"] != 0):
-            memory["treasure"] = obs["treasure_map"].copy()
-        target = memory.get("treasure", np.zeros(2))
-        step = (target - obs["position"]) / 0.1
-        return step / max(1.0, np.abs(step).max())
+    def __init__(self, strategy):
+        self.strategy = strategy
+        strategy.reset()
 
-    return act
+    def __call__(self, t, obs):
+        if t == 0:
+            self.strategy.reset()
+        return self.strategy.act(obs, 0.0)
+
+
+def test_climbing_beats_walking_the_circle_on_average():
+    """The scripted bracket of the docs: the climber reads the map in every task and beats the circle
+    walker (what a meta-learner that does not explore does) on average, not in every task."""
+    climbs, walks = [], []
+    for angle in np.linspace(0, 2 * np.pi, 16, endpoint=False):
+        env = suite.load("mountain_treasure_sparse", seed=0, treasure=[np.cos(angle), np.sin(angle)])
+        for strategy, returns, climbed in (
+            (scripted.MountainClimber(), climbs, 1),
+            (scripted.CircleWalker(), walks, 0),
+        ):
+            rewards, obs = scripted.rollout(env, strategy)
+            returns.append(rewards.sum())
+            positions = {"position": obs["position"][:, None]}
+            metrics = mt.treasure_metrics(positions, rewards[:, None], env.task.task_parameters[None])
+            assert metrics["reached_top"][0] == climbed and metrics["treasure_reached"][0] == 1
+    climbs, walks = np.array(climbs), np.array(walks)
+    assert climbs.min() > 700 and np.mean(climbs) > np.mean(walks) + 100
+    assert (walks > climbs).any()  # a treasure beside the start is found faster along the circle
 
 
 def test_the_climb_reads_the_map_and_pays():
     treasure = np.array([np.cos(2.0), np.sin(2.0)])
     env = suite.load("mountain_treasure_sparse", seed=0, treasure=treasure)
-    rewards, positions, _ = run(env, climb_then_walk())
+    rewards, positions, _ = run(env, _Strategy(scripted.MountainClimber()))
     # Ten steps up (the map is read strictly within 0.1 of the top), then the walk to the treasure.
     first_top = int(np.argmax(np.linalg.norm(positions, axis=1) < 0.1)) + 1
     assert first_top == 10
@@ -157,7 +178,7 @@ def test_top_down_behaviour_plot(tmp_path):
     assert view is not None and view.key == "position" and view.extent == (-1.5, 1.5, -1.5, 1.5)
     assert suite.top_down("cheetah_dir_sparse") is None
     env = suite.load(K8, seed=0)
-    runs = [run(env, climb_then_walk()) for _ in range(3)]
+    runs = [run(env, _Strategy(scripted.MountainClimber())) for _ in range(3)]
     tasks = np.array([env.task.task_parameters])
     data = {
         "obs_position": np.stack([r[1] for r in runs[:1]], axis=1),
