@@ -5,6 +5,8 @@
 Point robot tasks: top-down, the goal prior, and a scripted explorer that visits the candidate goals in
 turn (the true goal starred) until it is rewarded, then stays. cheetah_vel_sparse: the reward per step
 against velocity for three targets, zero inside the zone. quadruped_goal_sparse: the goal prior top-down.
+mountain_treasure_sparse: the scripted climber beside the circle walker on one task; rooms_sparse: the
+scripted corner explorer on one task; both drawn over the scene the task declares (`suite.top_down`).
 Every reward drawn is the task's own, read from a rollout of `suite.load` where there is one.
 """
 
@@ -23,6 +25,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 from hyperstate import suite  # noqa: E402
+from hyperstate.suite import scripted  # noqa: E402
 
 
 def explore(name: str, seed: int = 3, **kwargs) -> tuple[list[np.ndarray], np.ndarray, list[float], np.ndarray]:
@@ -110,6 +113,31 @@ def quadruped_picture(out: Path) -> Path:
     return path
 
 
+def top_down_picture(name: str, strategies: dict, out: Path, task: np.ndarray, size: tuple[float, float]) -> Path:
+    """One panel per scripted strategy: its path over the task's scene, titled with its return."""
+    view = suite.top_down(name)
+    fig, axes = plt.subplots(len(strategies), 1, figsize=size, squeeze=False)
+    for ax, (label, strategy) in zip(axes[:, 0], strategies.items(), strict=True):
+        env = suite.load(name, seed=0, **{"treasure" if name.startswith("mountain") else "goals": task})
+        rewards, observations = scripted.rollout(env, strategy)
+        view.draw_scene(ax, task)
+        xy = observations[view.key]
+        ax.plot(xy[:, 0], xy[:, 1], "-", color="tab:blue", linewidth=1.5)
+        ax.plot(*xy[-1], "x", color="tab:blue", markersize=8)
+        ax.set_xlim(*view.extent[:2])
+        ax.set_ylim(*view.extent[2:])
+        ax.set_aspect("equal")
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_title(f"{label}: return {rewards.sum():.0f}", fontsize=9)
+    fig.suptitle(name, fontsize=10)
+    fig.tight_layout()
+    path = out / f"task_{name}.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
 def main(argv: list[str] | None = None) -> list[Path]:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("docs/figures"))
@@ -120,6 +148,20 @@ def main(argv: list[str] | None = None) -> list[Path]:
         point_picture("point_robot_sparse", args.out, num_goals=5),
         cheetah_vel_picture(args.out),
         quadruped_picture(args.out),
+        top_down_picture(
+            "mountain_treasure_sparse",
+            {"climb, read the map, walk to it": scripted.MountainClimber(), "walk the circle": scripted.CircleWalker()},
+            args.out,
+            np.array([np.cos(2.2), np.sin(2.2)]),
+            (4.0, 7.6),
+        ),
+        top_down_picture(
+            "rooms_sparse",
+            {"try the corners stage by stage": scripted.RoomsExplorer()},
+            args.out,
+            suite.rooms.task_support()[20],
+            (8.0, 2.4),
+        ),
     ]
     print(*written, sep="\n")
     return written

@@ -356,7 +356,14 @@ def test_task_pictures_draw_every_sparse_task_with_its_own_rewards(tmp_path):
     written = module.main(["--out", str(tmp_path)])
     assert sorted(p.name for p in written) == sorted(
         f"task_{n}.png"
-        for n in ("point_treasure_sparse", "point_robot_sparse", "cheetah_vel_sparse", "quadruped_goal_sparse")
+        for n in (
+            "point_treasure_sparse",
+            "point_robot_sparse",
+            "cheetah_vel_sparse",
+            "quadruped_goal_sparse",
+            "mountain_treasure_sparse",
+            "rooms_sparse",
+        )
     )
     assert all(p.read_bytes()[:4] == b"\x89PNG" for p in written)
     # The treasure explorer is rewarded in episode 1 and goes straight back in episode 2: its second
@@ -365,3 +372,15 @@ def test_task_pictures_draw_every_sparse_task_with_its_own_rewards(tmp_path):
     half = len(rewards) // 2
     assert len(paths) == 2 and sum(rewards[half:]) > sum(rewards[:half]) > 0
     assert np.min(np.linalg.norm(candidates - goal, axis=1)) < 1e-6  # the goal is one of the candidates
+
+
+def test_scripted_bracket_ranks_the_mountain_strategies(tmp_path):
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("scripted_bracket", ROOT / "scripts" / "scripted_bracket.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    result = module.mountain(angles=8)
+    climber, walker = result["MountainClimber"], result["CircleWalker"]
+    assert climber["treasures"] == walker["treasures"] == 8
+    assert climber["min"] <= climber["mean"] <= climber["max"] and climber["mean"] > walker["mean"]
