@@ -305,10 +305,14 @@ def _top_down_plot(data, record: dict, view: suite.TopDownView, path: Path, plt)
     firsts = [int(np.flatnonzero((tasks == value).all(axis=1))[0]) for value in np.unique(tasks, axis=0)]
     firsts = sorted(firsts)[:TOP_DOWN_PANELS]
     x_min, x_max, y_min, y_max = view.extent
-    width = 3.2 * (x_max - x_min) / max(y_max - y_min, x_max - x_min)
-    height = 3.2 * (y_max - y_min) / max(y_max - y_min, x_max - x_min)
-    fig, axes = plt.subplots(1, len(firsts), figsize=(width * len(firsts) + 0.4, height + 0.8), squeeze=False)
-    for ax, i in zip(axes[0], firsts, strict=True):
+    aspect = (x_max - x_min) / (y_max - y_min)
+    if aspect > 2:  # a wide scene: panels one above the other, each 8 inches wide
+        width, height, rows, cols = 8.0, 8.0 / aspect, len(firsts), 1
+    else:
+        width, height, rows, cols = 3.2 * min(aspect, 1.0), 3.2 / max(aspect, 1.0), 1, len(firsts)
+    figsize = (width * cols + 0.4, (height + 0.35) * rows + 0.5)
+    fig, axes = plt.subplots(rows, cols, figsize=figsize, squeeze=False)
+    for ax, i in zip(axes.ravel(), firsts, strict=True):
         if view.draw_scene is not None:
             view.draw_scene(ax, tasks[i])
         ax.plot(xy[:, i, 0], xy[:, i, 1], "-", color="tab:blue", linewidth=1.5, alpha=0.8)
