@@ -154,7 +154,11 @@ def test_console_scripts_work_from_a_plain_install_into_a_fresh_venv(tmp_path):
                                 text=True).stdout.strip()  # fmt: skip
     Path(fresh_site, "dependencies.pth").write_text(sysconfig.get_paths()["purelib"] + "\n")
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"} | {"MUJOCO_GL": "disable"}
-    for command, usage in (("hyperstate-run", "--agents"), ("hyperstate-merge", "--into")):
+    for command, usage in (
+        ("hyperstate-run", "--agents"),
+        ("hyperstate-merge", "--into"),
+        ("hyperstate-report", "--low-agent"),
+    ):
         proc = subprocess.run([venv / "bin" / command, "--help"], capture_output=True, text=True, env=env,
                               cwd=tmp_path, timeout=300)  # fmt: skip
         assert proc.returncode == 0 and proc.stdout.startswith(f"usage: {command}") and usage in proc.stdout

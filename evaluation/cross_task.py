@@ -1,0 +1,274 @@
+"""The cross-task report: committed grids of several tasks in one score, with rliable.
+
+    hyperstate-report docs/results/* [--out runs/cross_task] [--low-agent varibad] [--high-agent task_aware]
+                      [--agents A ...] [--pairs hyperx:varibad oracle_rh:oracle] [--reps 2000] [--seed 0]
+
+Each task's online return at deployment (every cell's `record["final"]["online_return"]`) is normalised
+between two agents of the same grid: 0 at the mean of `--low-agent` (default `varibad`, the meta-learner
+without an exploration bonus: the score says what exploration added) and 1 at the mean of `--high-agent`
+(default `task_aware`, the reference that is told the task: what knowing it would earn). A task whose grid
+lacks either agent, or where the high one does not beat the low one, is left out, with a message.
+Over tasks and seeds, with rliable (Agarwal et al., 2021) and stratified bootstrap (runs resampled within
+each task), the report gives:
+- the IQM of the normalised score per agent, with 95 % CIs;
+- performance profiles: the fraction of runs whose normalised score exceeds τ, with 95 % CIs;
+- the probability of improvement of one agent over another (`--pairs X:Y`: P(X > Y)), with 95 % CIs.
+An agent is scored on the tasks that have it; per task on its first k seeds, k the fewest seeds it has
+on any of them (a bootstrap over tasks needs as many runs per task). Agents missing from a task are left
+out of the aggregate, with a message.
+Writes OUT/cross_task.csv (one row per statistic: `normaliser` per task with its `low` and `high`
+returns, `iqm` per agent and `probability_of_improvement` per pair with `value`, `ci_low`, `ci_high` and
+the `runs` behind them; the profiles are in the figure) and OUT/cross_task.png.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from hyperstate.evaluation import cli
+from hyperstate.evaluation.cell import load_records
+
+CSV_NAME, FIGURE_NAME = "cross_task.csv", "cross_task.png"
+FIELDS = ("statistic", "agent", "task", "value", "ci_low", "ci_high", "runs", "low", "high")
+DEFAULT_PAIRS = ("hyperx:varibad", "oracle_rh:oracle")
+TAUS = np.linspace(-0.5, 1.5, 81)  # normalised scores drawn in the performance profile
+
+
+class ReportError(ValueError):
+    """Grids that cannot make a cross-task report; one line for the user."""
+
+
+def returns_by_task(grids: list[Path], say=print) -> dict[str, dict[str, dict[int, float]]]:
+    """{task: {agent: {seed: online return at deployment}}} from the finished cells of `grids`. An agent
+    is one configuration: its cells on a task come from the grids whose configuration for it equals the
+    first one found (runtime settings aside); a cell (agent, task, seed) in several grids is taken from the
+    first."""
+    from hyperstate.evaluation.merge import comparable
+
+    table: dict[str, dict[str, dict[int, float]]] = defaultdict(lambda: defaultdict(dict))
+    configs: dict[tuple[str, str], dict] = {}
+    left_out = defaultdict(set)
+    for folder in grids:
+        records = [r for r in load_records(folder) if r.get("complete") and r.get("final")]
+        if not records:
+            raise ReportError(f"{folder} holds no finished cell (cells/*/record.json with a final deployment)")
+        for r in sorted(records, key=lambda r: (r["task"], r["agent"], r["seed"])):
+            key, config = (r["task"], r["agent"]), comparable(r.get("config", {}))
+            if configs.setdefault(key, config) != config:
+                left_out[folder].add(f"{r['agent']} (another configuration than in an earlier grid)")
+                continue
+            seeds = table[r["task"]][r["agent"]]
+            if r["seed"] in seeds:
+                left_out[folder].add(f"{r['agent']} s{r['seed']} (already taken from an earlier grid)")
+                continue
+            seeds[r["seed"]] = float(r["final"]["online_return"])
+    for folder, cells in left_out.items():
+        say(f"cross-task report: {folder}: left out {', '.join(sorted(cells))}")
+    return table
+
+
+def normalisers(table, low_agent: str, high_agent: str, say=print) -> dict[str, tuple[float, float]]:
+    """Per task, (low, high): the mean returns of the two normalising agents; tasks without them skipped."""
+    out = {}
+    for task, agents in sorted(table.items()):
+        missing = [a for a in (low_agent, high_agent) if a not in agents]
+        if missing:
+            say(f"cross-task report: {task} left out: its grid has no {' and no '.join(missing)} cell")
+            continue
+        low, high = (float(np.mean(list(agents[a].values()))) for a in (low_agent, high_agent))
+        if not high > low:
+            say(f"cross-task report: {task} left out: {high_agent} ({high:.1f}) does not beat {low_agent} ({low:.1f})")
+            continue
+        out[task] = (low, high)
+    return out
+
+
+def score_matrices(table, scales, agents: list[str] | None, say=print) -> dict[str, np.ndarray]:
+    """{agent: (runs, tasks) normalised scores} over the normalised tasks, in the order of `scales`."""
+    tasks = list(scales)
+    candidates = agents or sorted({a for t in tasks for a in table[t]})
+    matrices = {}
+    for agent in candidates:
+        lacking = [t for t in tasks if agent not in table[t]]
+        if lacking:
+            say(f"cross-task report: {agent} left out: no cell on {', '.join(lacking)}")
+            continue
+        runs = min(len(table[t][agent]) for t in tasks)
+        columns = []
+        for t in tasks:
+            low, high = scales[t]
+            seeds = sorted(table[t][agent])[:runs]
+            columns.append([(table[t][agent][s] - low) / (high - low) for s in seeds])
+        matrices[agent] = np.array(columns).T
+    if not matrices:
+        raise ReportError("no agent has a cell on every normalised task")
+    return matrices
+
+
+def interval_estimates(matrices, pairs: list[tuple[str, str]], reps: int, seed: int) -> tuple[list[dict], dict]:
+    """The CSV's `iqm` and `probability_of_improvement` rows, and the performance profiles."""
+    import warnings
+
+    # rliable's bootstraps (arch's) draw from NumPy's global generator; a RandomState handed to them is not
+    # used alike by every call. So each call starts from `seed` there, and the caller's state is restored.
+    saved = np.random.get_state()
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="random_state is deprecated", category=FutureWarning)
+            return _interval_estimates(matrices, pairs, reps, seed)
+    finally:
+        np.random.set_state(saved)
+
+
+def _interval_estimates(matrices, pairs, reps, seed):
+    from rliable import library as rly
+    from rliable import metrics
+
+    def iqm(scores):
+        return np.array([metrics.aggregate_iqm(scores)])
+
+    np.random.seed(seed)
+    point, ci = rly.get_interval_estimates(matrices, iqm, reps=reps)
+    rows = [
+        {"statistic": "iqm", "agent": a, "value": point[a][0], "ci_low": ci[a][0, 0], "ci_high": ci[a][1, 0],
+         "runs": matrices[a].size}
+        for a in matrices
+    ]  # fmt: skip
+    present = [(x, y) for x, y in pairs if x in matrices and y in matrices]
+    if present:
+        pair_scores = {f"{x}>{y}": (matrices[x], matrices[y]) for x, y in present}
+        np.random.seed(seed)
+        point, ci = rly.get_interval_estimates(pair_scores, metrics.probability_of_improvement, reps=reps)
+        rows += [
+            {"statistic": "probability_of_improvement", "agent": k, "value": float(np.squeeze(point[k])),
+             "ci_low": float(np.squeeze(ci[k][0])), "ci_high": float(np.squeeze(ci[k][1])),
+             "runs": pair_scores[k][0].size + pair_scores[k][1].size}
+            for k in pair_scores
+        ]  # fmt: skip
+    np.random.seed(seed)
+    profiles, profile_cis = rly.create_performance_profile(matrices, TAUS, reps=reps)
+    return rows, {"profiles": profiles, "cis": profile_cis}
+
+
+def write_figure(path: Path, rows: list[dict], profiles: dict, title: str = "") -> Path:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    iqm = [r for r in rows if r["statistic"] == "iqm"]
+    improvement = [r for r in rows if r["statistic"] == "probability_of_improvement"]
+    fig, (iqm_ax, profile_ax, poi_ax) = plt.subplots(1, 3, figsize=(15, 4.2))
+    colors = dict(zip(profiles["profiles"], plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, strict=False))
+    for k, r in enumerate(iqm):
+        iqm_ax.errorbar(r["value"], k, xerr=[[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]],
+                        fmt="o", color=colors[r["agent"]], capsize=4)  # fmt: skip
+    iqm_ax.set_yticks(range(len(iqm)), [r["agent"] for r in iqm])
+    iqm_ax.axvline(0, color="0.6", linewidth=1)
+    iqm_ax.axvline(1, color="0.6", linewidth=1, linestyle="--")
+    iqm_ax.set_xlabel("IQM of the normalised score (95 % CI)")
+    for agent, profile in profiles["profiles"].items():
+        low, high = profiles["cis"][agent]
+        profile_ax.plot(TAUS, profile, color=colors[agent], label=agent)
+        profile_ax.fill_between(TAUS, low, high, color=colors[agent], alpha=0.15)
+    profile_ax.set_xlabel("normalised score τ")
+    profile_ax.set_ylabel("fraction of runs with score > τ")
+    profile_ax.legend(fontsize=8)
+    for k, r in enumerate(improvement):
+        poi_ax.errorbar(r["value"], k, xerr=[[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]],
+                        fmt="o", color="k", capsize=4)  # fmt: skip
+    poi_ax.set_yticks(range(len(improvement)), [r["agent"].replace(">", " > ") for r in improvement])
+    poi_ax.axvline(0.5, color="0.6", linewidth=1, linestyle="--")
+    poi_ax.set_xlim(0, 1)
+    poi_ax.set_ylim(-0.5, len(improvement) - 0.5)
+    poi_ax.set_xlabel("probability of improvement (95 % CI)")
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
+
+
+def report(
+    grids: list[Path],
+    out: Path,
+    *,
+    low_agent: str = "varibad",
+    high_agent: str = "task_aware",
+    agents: list[str] | None = None,
+    pairs: list[tuple[str, str]] | None = None,
+    reps: int = 2000,
+    seed: int = 0,
+    say=print,
+) -> list[dict]:
+    """Writes OUT/cross_task.csv and OUT/cross_task.png from `grids`; returns the CSV's rows."""
+    table = returns_by_task(grids, say)
+    scales = normalisers(table, low_agent, high_agent, say)
+    if not scales:
+        raise ReportError(
+            f"no task has both {low_agent} and {high_agent} with {high_agent} ahead: nothing to normalise"
+        )
+    matrices = score_matrices(table, scales, agents, say)
+    pairs = [tuple(p.split(":")) for p in DEFAULT_PAIRS] if pairs is None else pairs
+    rows = [
+        {"statistic": "normaliser", "agent": f"{low_agent}..{high_agent}", "task": t, "low": low, "high": high}
+        for t, (low, high) in scales.items()
+    ]  # fmt: skip
+    estimated, profiles = interval_estimates(matrices, pairs, reps, seed)
+    rows += estimated
+    out.mkdir(parents=True, exist_ok=True)
+    with (out / CSV_NAME).open("w", newline="") as f:
+        writer = csv.DictWriter(f, FIELDS)
+        writer.writeheader()
+        writer.writerows({k: r.get(k, "") for k in FIELDS} for r in rows)
+    title = f"{len(scales)} task(s): {', '.join(scales)}; normalised score 0 = {low_agent}, 1 = {high_agent}"
+    write_figure(out / FIGURE_NAME, rows, profiles, title)
+    return rows
+
+
+def _pair(text: str) -> tuple[str, str]:
+    x, sep, y = text.partition(":")
+    if not sep or not x or not y:
+        raise argparse.ArgumentTypeError(f"a pair is X:Y (P(X > Y)), got {text!r}")
+    return x, y
+
+
+def main(argv: list[str] | None = None) -> int:
+    prog = cli.program_name("evaluation/cross_task.py")
+    parser = cli.OneLineParser(prog=prog, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("grids", nargs="+", type=Path, help="grid folders (evaluation/run.py or merge.py --out)")
+    parser.add_argument("--out", type=Path, default=Path("runs/cross_task"))
+    parser.add_argument("--low-agent", default="varibad", help="the agent each task's score 0 is (mean)")
+    parser.add_argument("--high-agent", default="task_aware", help="the agent each task's score 1 is (mean)")
+    parser.add_argument("--agents", nargs="+", default=None, help="agents to report (default: all)")
+    parser.add_argument("--pairs", nargs="+", type=_pair, default=None, help="X:Y, P(X > Y) (default: %(default)s)")
+    parser.add_argument("--reps", type=int, default=2000, help="bootstrap replications")
+    parser.add_argument("--seed", type=int, default=0, help="the bootstrap's seed")
+    args = parser.parse_args(argv)
+    grids = [g for g in args.grids if (g / "cells").is_dir()]
+    others = [str(g) for g in args.grids if g.is_dir() and g not in grids]  # plain files are passed over
+    if others:
+        print(f"{prog}: not grids (no cells/), left out: {', '.join(others)}", file=sys.stderr)
+    if not grids:
+        parser.error("none of the folders is a grid (a folder with cells/)")
+    try:
+        rows = report(grids, args.out, low_agent=args.low_agent, high_agent=args.high_agent, agents=args.agents,
+                      pairs=args.pairs, reps=args.reps, seed=args.seed,
+                      say=lambda m: print(f"{prog}: {m.split(': ', 1)[1]}", file=sys.stderr))  # fmt: skip
+    except ReportError as e:
+        parser.exit(1, f"{prog}: {e}\n")
+    for r in rows:
+        if r["statistic"] != "normaliser":
+            print(f"{r['statistic']:28s} {r['agent']:24s} {r['value']:7.3f}  [{r['ci_low']:.3f}, {r['ci_high']:.3f}]")
+    print(f"{args.out / CSV_NAME}\n{args.out / FIGURE_NAME}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
