@@ -18,7 +18,6 @@ for agent in "${AGENT_LIST[@]}"; do
   out="${OUT}_${agent}"
   EXTRA=()
   [ -f "$out/grid.json" ] && EXTRA+=(--resume)
-  [ -f "$out/summary.csv" ] && [ -z "${EXTRA[*]}" ] && continue
   echo "=== $agent on $TASK: start $(date -u +%FT%TZ) commit $(git rev-parse --short HEAD)"
   MUJOCO_GL=disable .venv/bin/python evaluation/run.py \
     --agents "$agent" --tasks "$TASK" --seeds "${SEED:-0}" \
