@@ -14,15 +14,11 @@ evaluation/upgrade.py); an incomplete one resumes from its checkpoint.
 from __future__ import annotations
 
 import dataclasses
-import io
 import json
 import os
-import platform
-import subprocess
 import sys
 import time
 from collections.abc import Callable
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -38,8 +34,12 @@ from hyperstate.evaluation.deploy import (
     evaluation_tasks,
     reads_true_task,
 )
+
+# Moved to their own modules; importable from here too until the deprecation in docs/evaluation.md runs out.
+from hyperstate.evaluation.imports import import_modules, materialize_imports, read_import_sources  # noqa: F401
+from hyperstate.evaluation.provenance import cpu_description, versions  # noqa: F401
 from hyperstate.evaluation.upgrade import upgrade_record
-from hyperstate.files import write_bytes_atomic
+from hyperstate.files import save_array_atomic, write_json_atomic
 
 
 @dataclasses.dataclass(frozen=True)
@@ -74,132 +74,12 @@ class CellSpec:
         return grid.cell_dir(Path(self.out), self.cell_id)
 
 
-def save_array_atomic(path: Path, array: np.ndarray) -> None:
-    """`array` as a .npy file, written atomically (`write_bytes_atomic`)."""
-    buffer = io.BytesIO()
-    np.save(buffer, array)
-    write_bytes_atomic(path, buffer.getvalue())
-
-
-def write_json_atomic(path: Path, data: Any) -> None:
-    """`data` as JSON, written atomically (`write_bytes_atomic`)."""
-    write_bytes_atomic(path, json.dumps(data, indent=1, default=_json_default).encode())
-
-
 def report_failure(spec: CellSpec, error: BaseException) -> str:
     """Prints one line about a failed cell to stderr and returns it."""
     line = f"{spec.cell_id}: {type(error).__name__}: {error}".splitlines()[0]
     command = cli.program_name("evaluation/run.py")
     print(f"{command}: cell failed (the others go on; --resume retries it): {line}", file=sys.stderr)
     return line
-
-
-def _json_default(value: Any) -> Any:
-    if isinstance(value, np.generic):
-        return value.item()
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    raise TypeError(f"not JSON serialisable: {type(value).__name__}")
-
-
-def versions() -> dict:
-    """Package versions, the git commit of the code and the processor that produced a result."""
-    out = {"python": platform.python_version()}
-    for package in ("hyperstate", "torch", "mujoco", "dm-control", "numpy"):
-        try:
-            out[package] = metadata.version(package)
-        except metadata.PackageNotFoundError:
-            out[package] = None
-    try:
-        root = Path(__file__).resolve().parents[1]
-        out["git_commit"] = (
-            subprocess.run(
-                ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10
-            ).stdout.strip()
-            or None
-        )
-    except (OSError, subprocess.SubprocessError):
-        out["git_commit"] = None
-    out["cpu"] = cpu_description()
-    return out
-
-
-def cpu_description() -> str:
-    """The processor and its widest vector unit: a run's floats, and so its learning curve, depend on them."""
-    model, flags = platform.processor() or platform.machine(), set()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() == "model name" and value.strip():
-                model = value.strip()
-            elif key.strip() == "flags":
-                flags = set(value.split())
-            if flags and model:
-                break
-    except OSError:
-        pass
-    vector = next((f for f in ("avx512f", "avx2", "avx", "neon", "asimd") if f in flags), None)
-    return f"{model} ({vector})" if vector else model
-
-
-def read_import_sources(names: tuple[str, ...] | list[str]) -> tuple[tuple[str, str], ...]:
-    """(path, source) of every .py file among `--import` names, for cells on other machines."""
-    return tuple((name, Path(name).read_text()) for name in names if name.endswith(".py"))
-
-
-def materialize_imports(imports: tuple[str, ...], sources: tuple[tuple[str, str], ...]) -> tuple[str, ...]:
-    """`imports` with each shipped .py file replaced by a copy of its source on this machine.
-
-    The copy keeps the file's name (its module name: what registers the user's tasks and agents) in a
-    folder named by the source's hash, so a worker that runs several cells imports the same file again
-    (a no-op) and a changed source is never taken for the old one.
-    """
-    import hashlib
-    import tempfile
-
-    shipped = dict(sources)
-    local = []
-    for name in imports:
-        if name not in shipped:
-            local.append(name)
-            continue
-        source = shipped[name]
-        digest = hashlib.sha256(source.encode()).hexdigest()[:16]
-        path = Path(tempfile.gettempdir()) / "hyperstate-imports" / digest / Path(name).name
-        if not path.exists():  # the folder is named by the source's hash: an existing copy is this source
-            path.parent.mkdir(parents=True, exist_ok=True)
-            write_bytes_atomic(path, source.encode())
-        local.append(str(path))
-    return tuple(local)
-
-
-def import_modules(names: tuple[str, ...] | list[str]) -> None:
-    """Imports modules by name or .py path (user tasks register themselves with suite on import)."""
-    import importlib
-    import importlib.util
-    import sys
-
-    for name in names:
-        if name.endswith(".py"):
-            module_name = Path(name).stem
-            if module_name in sys.modules:
-                # The same file again is a no-op; another module of that name (a file with the same stem, or
-                # a library such as `json`) would otherwise be taken silently for this file.
-                loaded = getattr(sys.modules[module_name], "__file__", None)
-                if loaded is not None and Path(loaded).resolve() == Path(name).resolve():
-                    continue
-                raise ImportError(
-                    f"{name}: a module named {module_name!r} is already imported (from {loaded or 'a built-in'}); "
-                    "rename the file"
-                )
-            spec = importlib.util.spec_from_file_location(module_name, name)
-            if spec is None or spec.loader is None:
-                raise ImportError(f"cannot import {name}")
-            module = importlib.util.module_from_spec(spec)
-            sys.modules[module_name] = module
-            spec.loader.exec_module(module)
-        else:
-            importlib.import_module(name)
 
 
 def training_task(spec: CellSpec, agent) -> str:
@@ -212,191 +92,281 @@ def training_task(spec: CellSpec, agent) -> str:
     return dense if dense is not None and reads_true_task(agent) else spec.task
 
 
+class PointLog:
+    """The training-log values the next curve point averages: per family (the reward streams' shares, the
+    value heads' advantage spreads), per stream, the values of the iterations since the previous point.
+
+    Each iteration's values also go to a file (grid.POINT_LOG), from which a resumed cell restores those of
+    the iterations between its last point and its checkpoint (a periodic checkpoint falls between points),
+    so that each point averages its own iterations, as in an uninterrupted run."""
+
+    FAMILIES = ("reward_share", "advantage_std")
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.since_point: dict[str, dict[str, list[float]]] = {family: {} for family in self.FAMILIES}
+
+    def add(self, values: dict[str, dict[str, float]]) -> None:
+        """Adds one iteration's values ({family: {stream: value}}) to those the next point averages."""
+        for family, streams in values.items():
+            for stream, value in streams.items():
+                self.since_point[family].setdefault(stream, []).append(value)
+
+    def record(self, frames: int, values: dict[str, dict[str, float]]) -> None:
+        """Adds one iteration's values and appends them to the file."""
+        self.add(values)
+        with self.path.open("a") as f:
+            f.write(json.dumps({"frames": frames, "values": values}) + "\n")
+
+    def entries(self) -> list[dict]:
+        """The iterations in the file; a line cut short by a crash ends it."""
+        entries = []
+        if self.path.exists():
+            for line in self.path.read_text().splitlines():
+                try:
+                    entries.append(json.loads(line))
+                except json.JSONDecodeError:
+                    break
+        return entries
+
+    def restore(self, after: int, before: int) -> None:
+        """After a resume: takes back the iterations logged between frames `after` (the last point) and
+        `before` (the checkpoint), and keeps only those in the file."""
+        restored = [e for e in self.entries() if after < e["frames"] < before]
+        for entry in restored:
+            self.add(entry["values"])
+        self.path.write_text("".join(json.dumps(e) + "\n" for e in restored))
+
+    def clear_file(self) -> None:
+        """The previous point and its checkpoint are on disk: its iterations are not needed again."""
+        self.path.write_text("")
+
+    def take_averages(self) -> dict[str, dict[str, float]]:
+        """{family: {stream: mean}} since the previous point, for the new point; starts the next one."""
+        out = {}
+        for family, streams in self.since_point.items():
+            if streams:
+                out[family] = {stream: float(np.mean(values)) for stream, values in streams.items()}
+                streams.clear()
+        return out
+
+
+def read_point_log(path: Path) -> list[dict]:
+    """The iterations in a cell's point log (`PointLog.entries`)."""
+    return PointLog(path).entries()
+
+
 def run_cell(spec: CellSpec, sync: Callable[[], None] | None = None) -> dict:
     """Trains and evaluates one cell; returns its record (also on disk). The agent is used only through
     the benchmarkable-agent protocol (evaluation/protocol.py). `sync()`, if given, is called before every
     training iteration's bookkeeping, when the files of the previous one (checkpoint included) are
     written: a Ray cell copies them to its storage there (evaluation/remote.py)."""
     import torch  # noqa: F401  (imported here so that worker processes set their own threads)
-    from torch.utils.tensorboard import SummaryWriter
 
     if spec.physics_threads:
         # Parallel cells share the cores; the suite's batched simulators read this (results do not depend on it).
         os.environ["HYPERSTATE_PHYSICS_THREADS"] = str(spec.physics_threads)
     import_modules(spec.imports)
-    directory = spec.directory
-    directory.mkdir(parents=True, exist_ok=True)
-    record_path = directory / grid.RECORD
+    spec.directory.mkdir(parents=True, exist_ok=True)
+    record_path = spec.directory / grid.RECORD
     if spec.resume and record_path.exists():
         record = json.loads(record_path.read_text())
         if record.get("complete") and record["frames"] >= spec.frames:
             # Written by older code? Brought up to the current metrics from what the cell saved.
-            if upgrade_record(record, directory, spec.episodes_per_task):
+            if upgrade_record(record, spec.directory, spec.episodes_per_task):
                 write_json_atomic(record_path, record)
             return record
-    agent = protocol.make_agent(spec.agent, **spec.overrides)
-    record = {
-        "agent": spec.agent,
-        "task": spec.task,
-        "seed": spec.seed,
-        "frames": spec.frames,
-        "trained_on": training_task(spec, agent),
-        "config": protocol.describe(agent),
-        "curve": [],
-        "final": None,
-        "versions": versions(),
-        "complete": False,
-    }
-    if spec.resume and record_path.exists():
-        record["curve"] = json.loads(record_path.read_text())["curve"]
-    tasks = evaluation_tasks(spec.task, spec.eval_tasks)
-    coverage = HyperStateCoverage.for_task(spec.task)  # None where the task declares no coverage grid
-    coverage_path = directory / grid.COVERAGE
-    if coverage is not None and spec.resume and coverage_path.exists():
-        # Cells are a set: replaying iterations after the checkpoint marks the same cells again.
-        coverage.visited = np.load(coverage_path)
-    writer = SummaryWriter(log_dir=str(Path(spec.out) / grid.TENSORBOARD / spec.cell_id))
-    started = time.perf_counter() - (record["curve"][-1]["wall_seconds"] if record["curve"] else 0.0)
+    return CellRun(spec, sync).run()
 
-    # Training-log families averaged into each curve point over the iterations since the previous one: the
-    # reward streams' shares and the value heads' advantage spreads, each keyed by stream. Each iteration's
-    # values also go to a log on disk (grid.POINT_LOG), from which a resumed cell restores those of the
-    # iterations between the last point and its checkpoint (a periodic checkpoint falls between points).
-    since_point: dict[str, dict[str, list[float]]] = {"reward_share": {}, "advantage_std": {}}
-    point_log = directory / grid.POINT_LOG
 
-    def evaluate(frames: int) -> dict:
-        metrics = deployment_metrics(deploy(agent, spec.task, tasks, spec.episodes_per_task), spec.task)
-        sampled = deploy(agent, spec.task, tasks, spec.episodes_per_task, deterministic=False)
+class CellRun:
+    """One cell's training run: its state is the attributes, its steps the methods — train to the next
+    evaluation point (`on_iteration`, called by the agent after every training iteration), deploy and
+    write the point (`write_point`), checkpoint (the agent does, when `on_iteration` returns True), and
+    at the end deploy the final agent (`finish`)."""
+
+    PROGRESS_EVERY = 2.0  # seconds between the progress files the driver's view reads
+
+    def __init__(self, spec: CellSpec, sync: Callable[[], None] | None = None):
+        from torch.utils.tensorboard import SummaryWriter
+
+        self.spec, self.sync = spec, sync
+        self.directory = spec.directory
+        self.record_path = self.directory / grid.RECORD
+        self.agent = protocol.make_agent(spec.agent, **spec.overrides)
+        self.record = {
+            "agent": spec.agent,
+            "task": spec.task,
+            "seed": spec.seed,
+            "frames": spec.frames,
+            "trained_on": training_task(spec, self.agent),
+            "config": protocol.describe(self.agent),
+            "curve": [],
+            "final": None,
+            "versions": versions(),
+            "complete": False,
+        }
+        if spec.resume and self.record_path.exists():
+            self.record["curve"] = json.loads(self.record_path.read_text())["curve"]
+        self.tasks = evaluation_tasks(spec.task, spec.eval_tasks)
+        self.coverage = HyperStateCoverage.for_task(spec.task)  # None where the task declares no coverage grid
+        self.coverage_path = self.directory / grid.COVERAGE
+        if self.coverage is not None and spec.resume and self.coverage_path.exists():
+            # Cells are a set: replaying iterations after the checkpoint marks the same cells again.
+            self.coverage.visited = np.load(self.coverage_path)
+        self.writer = SummaryWriter(log_dir=str(Path(spec.out) / grid.TENSORBOARD / spec.cell_id))
+        curve = self.record["curve"]
+        self.started = time.perf_counter() - (curve[-1]["wall_seconds"] if curve else 0.0)
+        self.point_log = PointLog(self.directory / grid.POINT_LOG)
+        self.last_progress = 0.0
+        self.replaying = spec.resume  # until the first iteration after a resume has been seen
+        self.point_written = False  # the previous iteration wrote a curve point
+
+    def run(self) -> dict:
+        spec = self.spec
+        if hasattr(self.agent, "name"):
+            self.agent.name = f"{spec.agent} seed {spec.seed}"
+        protocol.train(
+            self.agent,
+            self.record["trained_on"],
+            spec.frames,
+            spec.seed,
+            checkpoint_dir=self.directory,
+            resume=spec.resume,
+            progress=spec.progress,
+            on_iteration=self.on_iteration,
+            on_rollout=None if self.coverage is None else self.coverage.update,
+        )
+        return self.finish()
+
+    # Training iterations ---------------------------------------------------------------------------
+    def on_iteration(self, log: dict) -> bool:
+        """After every training iteration: log it; at an evaluation point deploy and write the point.
+        Returns whether the agent should checkpoint now (a resumed run rejoins the curve there)."""
+        if self.sync is not None:
+            self.sync()
+        frames = int(log["frames"])
+        if self.replaying:
+            self.rejoin_curve(frames)
+        elif self.point_written:
+            self.point_log.clear_file()
+        self.point_written = False
+        self.report_progress(frames, float(log.get("fps", 0.0)))
+        self.log_iteration(frames, log)
+        if not self.due(frames):
+            return False
+        self.point_written = True
+        self.write_point(frames)
+        return True
+
+    def rejoin_curve(self, frames: int) -> None:
+        """The first iteration after the checkpoint: points at or past it were written after the checkpoint
+        (a crash between the two) and are evaluated again in place, so that each point still averages its
+        own iterations, as in an uninterrupted run: those after the last point and up to the checkpoint
+        come back from the point log."""
+        self.record["curve"] = [p for p in self.record["curve"] if p["frames"] < frames]
+        last_point = self.record["curve"][-1]["frames"] if self.record["curve"] else 0
+        self.point_log.restore(last_point, frames)
+        self.replaying = False
+
+    def log_iteration(self, frames: int, log: dict) -> None:
+        """The iteration's scalars to tensorboard, its averaged families to the point log, and the
+        coverage to disk."""
+        values: dict[str, dict[str, float]] = {}
+        for key, value in log.items():
+            family, _, stream = key.partition("/")
+            if family in PointLog.FAMILIES:
+                values.setdefault(family, {})[stream] = value
+            if isinstance(value, float) and key not in ("wall_seconds",):
+                self.writer.add_scalar(key if "/" in key else f"train/{key}", value, frames)
+        self.point_log.record(frames, values)
+        if self.coverage is not None:
+            # Every iteration: a resume replays only the iterations after its checkpoint, which may fall
+            # between points, so the visits of those before it must already be on disk.
+            save_array_atomic(self.coverage_path, self.coverage.visited)
+
+    def due(self, frames: int) -> bool:
+        """An evaluation point: the first report in each eval_every-frames interval, and the last one."""
+        spec, curve = self.spec, self.record["curve"]
+        bucket = frames // spec.eval_every
+        done = any(p["frames"] // spec.eval_every == bucket and p["frames"] <= frames for p in curve)
+        final_done = bool(curve) and curve[-1]["frames"] == frames
+        return (bucket >= 1 and not done) or (frames >= spec.frames and not final_done)
+
+    def write_point(self, frames: int) -> None:
+        """Deploys the agent, adds the curve point, saves the agent's snapshot and the record."""
+        self.evaluate(frames)
+        # The agent at every evaluation point, for diagnostics through training (bonus heat maps).
+        snapshot = grid.snapshot_path(Path(self.spec.out), self.spec.cell_id, frames)
+        snapshot.parent.mkdir(exist_ok=True)
+        self.agent.save(snapshot)
+        write_json_atomic(self.record_path, self.record)
+
+    def evaluate(self, frames: int) -> dict:
+        """One curve point: deterministic and sampled deployments on the held-out tasks."""
+        spec = self.spec
+        metrics = deployment_metrics(deploy(self.agent, spec.task, self.tasks, spec.episodes_per_task), spec.task)
+        sampled = deploy(self.agent, spec.task, self.tasks, spec.episodes_per_task, deterministic=False)
         point = {
             "frames": frames,
             "online_return": metrics["online_return"],
             "online_return_stochastic": float(sampled.rewards.sum(0).mean()),
             "episode_returns": metrics["episode_returns"],
-            "wall_seconds": time.perf_counter() - started,
+            "wall_seconds": time.perf_counter() - self.started,
         }
-        for family, streams in since_point.items():
-            if streams:
-                point[family] = {stream: float(np.mean(values)) for stream, values in streams.items()}
-                streams.clear()
-        if coverage is not None and coverage.visited.any():
-            point["coverage"] = coverage.fraction()
-            writer.add_scalar("eval/hyperstate_coverage", point["coverage"], frames)
+        point.update(self.point_log.take_averages())
+        if self.coverage is not None and self.coverage.visited.any():
+            point["coverage"] = self.coverage.fraction()
+            self.writer.add_scalar("eval/hyperstate_coverage", point["coverage"], frames)
         # A point re-run after a crash (its checkpoint was not yet written) replaces the old one.
-        record["curve"] = [p for p in record["curve"] if p["frames"] < frames] + [point]
-        writer.add_scalar("eval/online_return", point["online_return"], frames)
+        self.record["curve"] = [p for p in self.record["curve"] if p["frames"] < frames] + [point]
+        self.writer.add_scalar("eval/online_return", point["online_return"], frames)
         return metrics
 
-    def due(frames: int) -> bool:
-        """An evaluation point: the first report in each eval_every-frames interval, and the last one."""
-        bucket = frames // spec.eval_every
-        done = any(p["frames"] // spec.eval_every == bucket and p["frames"] <= frames for p in record["curve"])
-        final_done = bool(record["curve"]) and record["curve"][-1]["frames"] == frames
-        return (bucket >= 1 and not done) or (frames >= spec.frames and not final_done)
-
-    last_progress = [0.0]
-
-    def report_progress(frames: int, fps: float, complete: bool = False) -> None:
+    def report_progress(self, frames: int, fps: float, complete: bool = False) -> None:
         """The cell's state for the driver's view (evaluation/progress.py); at most every 2 s."""
         now = time.perf_counter()
-        if not complete and now - last_progress[0] < 2.0:
+        if not complete and now - self.last_progress < self.PROGRESS_EVERY:
             return
-        last_progress[0] = now
-        wall = now - started
-        point = record["curve"][-1] if record["curve"] else None
+        self.last_progress = now
+        wall, total = now - self.started, self.spec.frames
+        point = self.record["curve"][-1] if self.record["curve"] else None
         state = {
             "frames": frames,
-            "total_frames": spec.frames,
+            "total_frames": total,
             "fps": fps,
             "wall_seconds": wall,
             "online_return": None if point is None else point["online_return"],
             "return_frames": None if point is None else point["frames"],
-            "eta_seconds": None if frames <= 0 else max(0.0, (spec.frames - frames) * wall / frames),
+            "eta_seconds": None if frames <= 0 else max(0.0, (total - frames) * wall / frames),
             "complete": complete,
         }
-        write_json_atomic(directory / grid.PROGRESS, state)
+        write_json_atomic(self.directory / grid.PROGRESS, state)
 
-    replaying = [spec.resume]  # until the first iteration after a resume has been seen
-    point_written = [False]  # the previous iteration wrote a curve point
-
-    def on_iteration(log: dict) -> bool:
-        if sync is not None:
-            sync()
-        frames = int(log["frames"])
-        if replaying[0]:
-            # The first iteration after the checkpoint: points at or past it were written after the checkpoint
-            # (a crash between the two) and are evaluated again in place, so that each point still averages
-            # its own iterations (`since_point`), as in an uninterrupted run: those after the last point
-            # and up to the checkpoint come back from the log.
-            record["curve"] = [p for p in record["curve"] if p["frames"] < frames]
-            last_point = record["curve"][-1]["frames"] if record["curve"] else 0
-            restored = [e for e in read_point_log(point_log) if last_point < e["frames"] < frames]
-            for entry in restored:
-                add_to_point(since_point, entry["values"])
-            point_log.write_text("".join(json.dumps(e) + "\n" for e in restored))
-            replaying[0] = False
-        elif point_written[0]:
-            # The previous iteration's point and its checkpoint are on disk: its iterations are not needed again.
-            point_log.write_text("")
-        point_written[0] = False
-        report_progress(frames, float(log.get("fps", 0.0)), complete=False)
-        values: dict[str, dict[str, float]] = {}
-        for key, value in log.items():
-            family, _, stream = key.partition("/")
-            if family in since_point:
-                values.setdefault(family, {})[stream] = value
-            if isinstance(value, float) and key not in ("wall_seconds",):
-                writer.add_scalar(key if "/" in key else f"train/{key}", value, frames)
-        add_to_point(since_point, values)
-        with point_log.open("a") as f:
-            f.write(json.dumps({"frames": frames, "values": values}) + "\n")
-        if coverage is not None:
-            # Every iteration: a resume replays only the iterations after its checkpoint, which may fall
-            # between points, so the visits of those before it must already be on disk.
-            save_array_atomic(coverage_path, coverage.visited)
-        if not due(frames):
-            return False
-        point_written[0] = True
-        evaluate(frames)
-        # The agent at every evaluation point, for diagnostics through training (bonus heat maps).
-        snapshot = grid.snapshot_path(Path(spec.out), spec.cell_id, frames)
-        snapshot.parent.mkdir(exist_ok=True)
-        agent.save(snapshot)
-        write_json_atomic(record_path, record)
-        return True  # checkpoint now: a resumed run rejoins the curve here
-
-    if hasattr(agent, "name"):
-        agent.name = f"{spec.agent} seed {spec.seed}"
-    protocol.train(
-        agent,
-        record["trained_on"],
-        spec.frames,
-        spec.seed,
-        checkpoint_dir=directory,
-        resume=spec.resume,
-        progress=spec.progress,
-        on_iteration=on_iteration,
-        on_rollout=None if coverage is None else coverage.update,
-    )
-    record["frames"] = int(getattr(agent, "total_frames", spec.frames))
-    final = deploy(agent, spec.task, tasks, spec.episodes_per_task)
-    record["final"] = deployment_metrics(final, spec.task, probe=True)
-    # The stochastic policy (sampled actions, fixed seed) next to the deterministic one.
-    sampled = deploy(agent, spec.task, tasks, spec.episodes_per_task, deterministic=False)
-    record["final"]["stochastic"] = deployment_metrics(sampled, spec.task)
-    if reads_true_task(agent):
-        # The reference also deployed Bayes-adaptively: an achievable lower bound on Bayes-optimal.
-        record["final"]["certainty_equivalent"] = certainty_equivalent_metrics(
-            agent, spec.task, tasks, spec.episodes_per_task
-        )
-    save_deployment(directory, final)
-    agent.save(directory / grid.AGENT)
-    point_log.unlink(missing_ok=True)
-    record["complete"] = True
-    write_json_atomic(record_path, record)
-    report_progress(record["frames"], 0.0, complete=True)
-    writer.close()
-    return record
+    # The end ---------------------------------------------------------------------------------------
+    def finish(self) -> dict:
+        """Deploys the final agent (deterministic, sampled, and Bayes-adaptively for the reference), saves
+        it and its deployment, and completes the record."""
+        spec, agent, record = self.spec, self.agent, self.record
+        record["frames"] = int(getattr(agent, "total_frames", spec.frames))
+        final = deploy(agent, spec.task, self.tasks, spec.episodes_per_task)
+        record["final"] = deployment_metrics(final, spec.task, probe=True)
+        # The stochastic policy (sampled actions, fixed seed) next to the deterministic one.
+        sampled = deploy(agent, spec.task, self.tasks, spec.episodes_per_task, deterministic=False)
+        record["final"]["stochastic"] = deployment_metrics(sampled, spec.task)
+        if reads_true_task(agent):
+            # The reference also deployed Bayes-adaptively: an achievable lower bound on Bayes-optimal.
+            record["final"]["certainty_equivalent"] = certainty_equivalent_metrics(
+                agent, spec.task, self.tasks, spec.episodes_per_task
+            )
+        save_deployment(self.directory, final)
+        agent.save(self.directory / grid.AGENT)
+        self.point_log.path.unlink(missing_ok=True)
+        record["complete"] = True
+        write_json_atomic(self.record_path, record)
+        self.report_progress(record["frames"], 0.0, complete=True)
+        self.writer.close()
+        return record
 
 
 def save_deployment(directory: Path, deployment: Any) -> None:
@@ -409,25 +379,6 @@ def save_deployment(directory: Path, deployment: Any) -> None:
         features=deployment.features,
         **{f"obs_{k}": v for k, v in deployment.observations.items()},
     )
-
-
-def add_to_point(since_point: dict[str, dict[str, list[float]]], values: dict[str, dict[str, float]]) -> None:
-    """Adds one iteration's logged values ({family: {stream: value}}) to those the next point averages."""
-    for family, streams in values.items():
-        for stream, value in streams.items():
-            since_point[family].setdefault(stream, []).append(value)
-
-
-def read_point_log(path: Path) -> list[dict]:
-    """The iterations in a cell's point log; a line cut short by a crash ends it."""
-    entries = []
-    if path.exists():
-        for line in path.read_text().splitlines():
-            try:
-                entries.append(json.loads(line))
-            except json.JSONDecodeError:
-                break
-    return entries
 
 
 def load_records(out: Path) -> list[dict]:

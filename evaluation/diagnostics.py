@@ -207,7 +207,7 @@ def _draw(out, cell, names, xs, frames, labels, through_training, along, run, ax
 
 
 def main(argv: list[str] | None = None) -> int:
-    from hyperstate.evaluation.cell import import_modules
+    from hyperstate.evaluation.imports import import_modules
 
     parser = argparse.ArgumentParser(prog="python -m hyperstate.evaluation.diagnostics", description=__doc__)
     parser.add_argument("out", type=Path, help="a results folder written by evaluation/run.py")

@@ -26,8 +26,9 @@ from pathlib import Path
 
 from hyperstate.agents.config import RUNTIME_FIELDS, AgentConfig, agent_settings, from_dict
 from hyperstate.evaluation import cli, grid
-from hyperstate.evaluation.cell import load_records, write_json_atomic, write_results
+from hyperstate.evaluation.cell import load_records, write_results
 from hyperstate.evaluation.report import text_table, write_figures, write_summary
+from hyperstate.files import write_json_atomic
 
 SOURCES = "sources.json"
 # What a merged cell keeps: the record and what the report draws from; agent.pt only with --with-agent.

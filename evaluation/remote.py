@@ -25,17 +25,11 @@ import time
 from pathlib import Path
 
 from hyperstate.evaluation import grid
-from hyperstate.evaluation.cell import (
-    CellSpec,
-    materialize_imports,
-    report_failure,
-    run_cell,
-    write_json_atomic,
-    write_results,
-)
+from hyperstate.evaluation.cell import CellSpec, report_failure, run_cell, write_results
+from hyperstate.evaluation.imports import materialize_imports
 from hyperstate.evaluation.progress import POLL_SECONDS, RESULTS_EVERY_SECONDS, GridProgress
 from hyperstate.evaluation.storage import CHECKPOINT, CellStore
-from hyperstate.files import write_bytes_atomic
+from hyperstate.files import write_bytes_atomic, write_json_atomic
 
 RETRIES = 3  # attempts after a node or worker dies (Ray's system-failure retries); errors are not retried
 

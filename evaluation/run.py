@@ -29,18 +29,11 @@ from hyperstate import agents, suite
 from hyperstate.agents.naming import unknown_name
 from hyperstate.evaluation import cli, protocol
 from hyperstate.evaluation import grid as grid_layout
-from hyperstate.evaluation.cell import (
-    CellSpec,
-    import_modules,
-    load_records,
-    read_import_sources,
-    report_failure,
-    run_cell,
-    write_json_atomic,
-    write_results,
-)
+from hyperstate.evaluation.cell import CellSpec, load_records, report_failure, run_cell, write_results
+from hyperstate.evaluation.imports import import_modules, read_import_sources
 from hyperstate.evaluation.progress import POLL_SECONDS, RESULTS_EVERY_SECONDS, GridProgress
 from hyperstate.evaluation.report import REFERENCE_AGENT, text_table, write_figures, write_summary
+from hyperstate.files import write_json_atomic
 
 
 class UsageError(Exception):

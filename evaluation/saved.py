@@ -42,7 +42,9 @@ def deploy_saved(
 ) -> list[dict]:
     """Deploys every saved agent (on `tasks`, default: each record's task) and writes its cell under `out`;
     returns the records."""
-    from hyperstate.evaluation.cell import save_deployment, versions, write_json_atomic
+    from hyperstate.evaluation.cell import save_deployment
+    from hyperstate.evaluation.provenance import versions
+    from hyperstate.files import write_json_atomic
 
     records = []
     for path in paths:

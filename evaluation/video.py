@@ -28,8 +28,8 @@ from PIL import Image, ImageDraw
 from hyperstate import suite
 from hyperstate.evaluation import grid as grid_layout
 from hyperstate.evaluation import protocol
-from hyperstate.evaluation.cell import import_modules
 from hyperstate.evaluation.deploy import EVAL_SEED, evaluation_tasks
+from hyperstate.evaluation.imports import import_modules
 
 GEOM_TYPES = {
     "box": mujoco.mjtGeom.mjGEOM_BOX,

@@ -7,10 +7,15 @@ share one) that replaces the target only once it is complete.
 from __future__ import annotations
 
 import contextlib
+import io
+import json
 import os
 import tempfile
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
+
+import numpy as np
 
 
 @contextlib.contextmanager
@@ -38,3 +43,23 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes) -> None:
 def write_text_atomic(path: str | os.PathLike, text: str) -> None:
     """Writes `text` (UTF-8) to `path` atomically (`replacing`)."""
     write_bytes_atomic(path, text.encode())
+
+
+def write_json_atomic(path: str | os.PathLike, data: Any) -> None:
+    """`data` as JSON (NumPy scalars and arrays as numbers and lists), written atomically."""
+    write_bytes_atomic(path, json.dumps(data, indent=1, default=_json_default).encode())
+
+
+def save_array_atomic(path: str | os.PathLike, array: np.ndarray) -> None:
+    """`array` as a .npy file, written atomically."""
+    buffer = io.BytesIO()
+    np.save(buffer, array)
+    write_bytes_atomic(path, buffer.getvalue())
+
+
+def _json_default(value: Any) -> Any:
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    raise TypeError(f"not JSON serialisable: {type(value).__name__}")

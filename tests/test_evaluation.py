@@ -380,7 +380,7 @@ def test_ray_on_two_nodes_without_a_shared_out_survives_a_dead_node(tmp_path, ti
 def test_ray_cells_import_the_drivers_copy_of_import_files(tmp_path):
     """A Ray cell's node need not have the user's --import files: the driver ships their sources, and the
     cell imports a copy under the same module name."""
-    from hyperstate.evaluation.cell import materialize_imports, read_import_sources
+    from hyperstate.evaluation.imports import materialize_imports, read_import_sources
 
     user = tmp_path / "shipped_user_presets.py"
     user.write_text(
@@ -393,7 +393,7 @@ def test_ray_cells_import_the_drivers_copy_of_import_files(tmp_path):
     copy = Path(imports[0])
     assert imports[1] == "json" and copy.name == user.name and copy.read_text() == sources[0][1]
     check = (
-        "import sys; from hyperstate.evaluation.cell import import_modules; import_modules(sys.argv[1:]); "
+        "import sys; from hyperstate.evaluation.imports import import_modules; import_modules(sys.argv[1:]); "
         "from hyperstate import agents; print(agents.get_preset('shipped_oracle').belief)"
     )
     proc = subprocess.run([sys.executable, "-c", check, *imports], capture_output=True, text=True, timeout=120)
@@ -574,7 +574,7 @@ def test_campaign_configs_change_what_they_say_on_the_campaigns_agents(path):
     them on top of research/turnaround/fig2.toml: its [all] table on `oracle_rh`, a preset's table on it."""
     import tomllib
 
-    from hyperstate.evaluation.cell import import_modules
+    from hyperstate.evaluation.imports import import_modules
 
     registered = set(agents.PRESETS)
     import_modules([str(CAMPAIGN / "fig2_presets.py"), str(CAMPAIGN / "campaign_presets.py")])
@@ -636,7 +636,7 @@ def test_grid_progress_view_plain_and_live(tmp_path, monkeypatch):
     import io
 
     from hyperstate.evaluation import grid, progress
-    from hyperstate.evaluation.cell import write_json_atomic
+    from hyperstate.files import write_json_atomic
 
     cells = [grid.cell_id("oracle", "cheetah_dir_sparse", s) for s in (0, 1)]
     state = {"frames": 400_000, "total_frames": 2_000_000, "fps": 6123.0, "wall_seconds": 65.0,

@@ -185,7 +185,7 @@ def test_loop_batch_snapshot_is_plain_data_and_restores_exactly():
 _WRITER = """
 import sys
 from pathlib import Path
-from hyperstate.evaluation.cell import write_json_atomic
+from hyperstate.files import write_json_atomic
 path, tag = Path(sys.argv[1]), sys.argv[2]
 for i in range(300):
     write_json_atomic(path, {"writer": tag, "i": i, "payload": list(range(2000))})
@@ -305,7 +305,7 @@ def test_the_lock_is_what_make_installed():
 def test_an_imported_file_is_never_mistaken_for_another_module(tmp_path, monkeypatch):
     """`--import x/extras.py` runs that file once; a second file with the same stem, or a file named like a
     library module, is an error instead of being skipped silently (its registrations would never happen)."""
-    from hyperstate.evaluation.cell import import_modules
+    from hyperstate.evaluation.imports import import_modules
 
     for folder in ("a", "b"):
         (tmp_path / folder).mkdir()

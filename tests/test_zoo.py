@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from hyperstate.evaluation.cell import cpu_description
+from hyperstate.evaluation.provenance import cpu_description
 from hyperstate.evaluation.saved import deploy_saved
 
 ROOT = Path(__file__).resolve().parents[1]

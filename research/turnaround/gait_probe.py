@@ -38,8 +38,8 @@ import torch  # noqa: E402
 
 from hyperstate import agents  # noqa: E402
 from hyperstate.evaluation import grid  # noqa: E402
-from hyperstate.evaluation.cell import import_modules  # noqa: E402
 from hyperstate.evaluation.deploy import deploy, evaluation_tasks  # noqa: E402
+from hyperstate.evaluation.imports import import_modules  # noqa: E402
 from hyperstate.suite.cheetah_dir import CONTROL_TIMESTEP  # noqa: E402
 
 TASK = "cheetah_dir_sparse"
