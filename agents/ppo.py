@@ -19,7 +19,7 @@ from torch import nn
 
 from hyperstate.agents.config import PPOConfig
 from hyperstate.agents.networks import Embed, layer_plan, mlp, run_plan
-from hyperstate.agents.rollout import Rollout
+from hyperstate.agents.rollout import Rollout, compute_gae  # noqa: F401  (compute_gae: its old home)
 
 
 class ActorCritic(nn.Module):
@@ -88,31 +88,6 @@ class ActorCritic(nn.Module):
 def gaussian_log_prob(noise: torch.Tensor, std: torch.Tensor) -> torch.Tensor:
     """log N(mean + std·noise | mean, std), summed over action dimensions (cheaper than Normal)."""
     return (-0.5 * noise.pow(2) - std.log() - 0.5 * math.log(2 * math.pi)).sum(-1)
-
-
-def compute_gae(
-    rewards: np.ndarray,
-    values: np.ndarray,
-    next_values: np.ndarray,
-    lasts: np.ndarray,
-    bootstrap: np.ndarray,
-    gamma: float,
-    lam: float,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Generalised advantage estimation over (T, N) arrays.
-
-    `next_values[t]` is V(s_{t+1}) (of the final observation where the episode ended at t),
-    `bootstrap[t]` multiplies it: 1 except at terminations (0). Truncated episodes (our BAMDP horizon)
-    bootstrap from V(final observation) and the advantage recursion restarts after every `last`.
-    Returns (advantages, returns).
-    """
-    advantages = np.zeros_like(rewards)
-    running = np.zeros(rewards.shape[1])
-    for t in reversed(range(rewards.shape[0])):
-        delta = rewards[t] + gamma * bootstrap[t] * next_values[t] - values[t]
-        running = delta + gamma * lam * (1.0 - lasts[t]) * running
-        advantages[t] = running
-    return advantages, advantages + values
 
 
 def _minibatches(rollout: Rollout, belief, config: PPOConfig, generator: torch.Generator):

@@ -78,3 +78,52 @@ class Rollout:
     def shape(self) -> tuple[int, int]:
         """(T, N)."""
         return tuple(self.rewards.shape)
+
+    def compute_returns_and_advantages(self, streams: list[tuple[str, np.ndarray, float]], lam: float) -> dict:
+        """GAE of each reward stream (name, (T, N) rewards, discount) against its own value head, in order:
+        fills `returns` (per head) and `advantages` (their sum: PPO follows all streams). Returns each
+        stream's advantage spread (`advantage_std/<name>`): PPO normalises the summed advantages, so the
+        spreads, not the rewards' shares, say which stream steers."""
+        lasts = self.lasts.numpy().astype(bool).astype(np.float64)
+        advantages = np.zeros_like(streams[0][1])
+        log = {}
+        for head, (name, rewards, gamma) in enumerate(streams):
+            head_advantages, head_returns = compute_gae(
+                rewards,
+                self.values[..., head].numpy(),
+                self.next_values[..., head].numpy(),
+                lasts,
+                self.bootstrap.numpy(),
+                gamma,
+                lam,
+            )
+            advantages = advantages + head_advantages
+            log[f"advantage_std/{name}"] = float(head_advantages.std())
+            self.returns[..., head] = torch.as_tensor(head_returns, dtype=torch.float32)
+        self.advantages.copy_(torch.as_tensor(advantages, dtype=torch.float32))
+        return log
+
+
+def compute_gae(
+    rewards: np.ndarray,
+    values: np.ndarray,
+    next_values: np.ndarray,
+    lasts: np.ndarray,
+    bootstrap: np.ndarray,
+    gamma: float,
+    lam: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Generalised advantage estimation over (T, N) arrays.
+
+    `next_values[t]` is V(s_{t+1}) (of the final observation where the episode ended at t),
+    `bootstrap[t]` multiplies it: 1 except at terminations (0). Truncated episodes (our BAMDP horizon)
+    bootstrap from V(final observation) and the advantage recursion restarts after every `last`.
+    Returns (advantages, returns).
+    """
+    advantages = np.zeros_like(rewards)
+    running = np.zeros(rewards.shape[1])
+    for t in reversed(range(rewards.shape[0])):
+        delta = rewards[t] + gamma * bootstrap[t] * next_values[t] - values[t]
+        running = delta + gamma * lam * (1.0 - lasts[t]) * running
+        advantages[t] = running
+    return advantages, advantages + values

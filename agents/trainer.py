@@ -30,7 +30,7 @@ from hyperstate.agents.bonuses import BonusInput
 from hyperstate.agents.config import BonusConfig
 from hyperstate.agents.normalization import ReturnScaler
 from hyperstate.agents.policy import Policy
-from hyperstate.agents.ppo import compute_gae, gaussian_log_prob, ppo_update
+from hyperstate.agents.ppo import gaussian_log_prob, ppo_update
 from hyperstate.agents.rollout import Rollout
 
 
@@ -428,20 +428,40 @@ class Trainer:
 
     # Learning ------------------------------------------------------------------------------------------
     def learn(self, iteration: int) -> dict:
-        """Bonuses, eq. (4), GAE, PPO, bonus and belief updates on the collected rollout; returns the log."""
-        policy, state, rollout = self.policy, self.state, self.rollout
-        p, cfg = policy.config.ppo, policy.config
-        t_len, n = rollout.shape
-        lasts = rollout.lasts.numpy().astype(bool)
-        extrinsic = rollout.rewards.numpy().astype(np.float64)
-        log: dict[str, Any] = {"reward/extrinsic_mean": float(extrinsic.mean())}
+        """The algorithm on the collected rollout: intrinsic rewards → eq. (4) → advantages → PPO → belief
+        training; returns the iteration's log."""
+        policy, rollout, p = self.policy, self.rollout, self.policy.config.ppo
+        log: dict[str, Any] = {"reward/extrinsic_mean": float(rollout.rewards.numpy().astype(np.float64).mean())}
         self.clock.start()
-        if policy.belief.trainable:
-            # Stored before the bonuses, so that those trained on replayed trajectories see this rollout's too.
-            self.store_trajectories(lasts)
+        extrinsic = self.training_reward()
+        raw_bonuses = self.intrinsic_rewards(log)
+        reward, intrinsic = self.combine(extrinsic, raw_bonuses, iteration, log)
+        log.update(rollout.compute_returns_and_advantages(self.reward_streams(reward, intrinsic), p.gae_lambda))
+        self.clock.mark("returns")  # eq. (4) and GAE
+        log.update(ppo_update(policy.model, policy.belief, self.state.optimizer, rollout, p, policy.generator))
+        self.clock.mark("ppo")
+        log.update(self.train_belief())
+        self.clock.mark("belief_training")
+        return log
+
+    def training_reward(self) -> np.ndarray:
+        """The extrinsic reward PPO trains on, (T, N): the task's, minus the sampled-action cost. Stores the
+        rollout's whole trajectories for belief training first, so that bonuses trained on replayed
+        trajectories see this rollout's too."""
+        rollout, p = self.rollout, self.policy.config.ppo
+        extrinsic = rollout.rewards.numpy().astype(np.float64)
+        if self.policy.belief.trainable:
+            self.store_trajectories(rollout.lasts.numpy().astype(bool))
         self.clock.mark("belief_training")
         if p.sampled_action_cost > 0:
             extrinsic = extrinsic - p.sampled_action_cost * self.excess_action_energy(rollout.actions.numpy())
+        return extrinsic
+
+    def intrinsic_rewards(self, log: dict) -> list[np.ndarray]:
+        """Each bonus's raw reward on the rollout, (T, N) each; then each bonus trains on it (its losses go
+        to `log`)."""
+        policy, rollout = self.policy, self.rollout
+        t_len, n = rollout.shape
         raw_bonuses = []
         if policy.bonuses:
             flat = BonusInput(
@@ -457,6 +477,14 @@ class Trainer:
                 raw_bonuses.append(bonus.reward(flat).numpy().astype(np.float64).reshape(t_len, n))
                 log.update(bonus.update(flat))
         self.clock.mark("bonus")  # the bonuses' rewards and their networks' updates
+        return raw_bonuses
+
+    def combine(
+        self, extrinsic: np.ndarray, raw_bonuses: list[np.ndarray], iteration: int, log: dict
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Eq. (4): the reward PPO sees and its intrinsic part, (T, N) each; each stream's share goes to `log`."""
+        policy, state, cfg = self.policy, self.state, self.policy.config
+        p = cfg.ppo
         progress = iteration / self.anneal_iterations
         anneals = [bonus_anneal_factor(b, cfg.anneal_bonus, progress) for b in cfg.bonuses]
         reward, scaled_bonuses = combine_rewards(
@@ -465,7 +493,7 @@ class Trainer:
             weights=[b.weight for b in cfg.bonuses],
             anneal=anneals,
             bonus_clips=[b.clip for b in cfg.bonuses],
-            lasts=lasts,
+            lasts=self.rollout.lasts.numpy().astype(bool),
             ext_scaler=state.ext_scaler if p.norm_reward else None,
             bonus_scalers=state.bonus_scalers,
             reward_clip=p.reward_clip,
@@ -484,40 +512,26 @@ class Trainer:
             magnitude.update({name: float(np.abs(w).mean()) for name, w in weighted})
             total = sum(magnitude.values()) or 1.0
             log.update({f"reward_share/{name}": m / total for name, m in magnitude.items()})
-        # One reward stream per value head: the combined reward, or (intrinsic_gamma) the extrinsic and the
-        # intrinsic parts, each with its own discount; PPO follows the sum of their advantages.
-        streams = [("combined", reward, p.gamma)]
-        if cfg.value_heads == 2:
-            streams = [("extrinsic", reward - intrinsic, p.gamma), ("intrinsic", intrinsic, p.intrinsic_gamma)]
-        advantages = np.zeros_like(reward)
-        for head, (stream_name, stream, gamma) in enumerate(streams):
-            head_advantages, head_returns = compute_gae(
-                stream,
-                rollout.values[..., head].numpy(),
-                rollout.next_values[..., head].numpy(),
-                lasts.astype(np.float64),
-                rollout.bootstrap.numpy(),
-                gamma,
-                p.gae_lambda,
-            )
-            advantages = advantages + head_advantages
-            # How much each stream moves the policy: PPO normalises the summed advantages, so their spreads
-            # (not the rewards' shares) say which stream steers.
-            log[f"advantage_std/{stream_name}"] = float(head_advantages.std())
-            rollout.returns[..., head] = torch.as_tensor(head_returns, dtype=torch.float32)
-        rollout.advantages.copy_(torch.as_tensor(advantages, dtype=torch.float32))
-        self.clock.mark("returns")  # eq. (4) and GAE
-        log.update(ppo_update(policy.model, policy.belief, state.optimizer, rollout, p, policy.generator))
-        self.clock.mark("ppo")
-        if policy.belief.trainable:
-            if state.trajectories.items:
-                losses = [
-                    policy.belief.train_step(state.trajectories.sample(cfg.vae.batch_trajectories, policy.generator))
-                    for _ in range(cfg.vae.updates_per_iteration)
-                ]
-                log.update({k: float(np.mean([x[k] for x in losses])) for k in losses[0]})
-        self.clock.mark("belief_training")
-        return log
+        return reward, intrinsic
+
+    def reward_streams(self, reward: np.ndarray, intrinsic: np.ndarray) -> list[tuple[str, np.ndarray, float]]:
+        """One reward stream per value head: the combined reward, or (two heads: `ppo.intrinsic_gamma`) the
+        extrinsic and the intrinsic parts, each with its own discount."""
+        p = self.policy.config.ppo
+        if self.policy.config.value_heads == 2:
+            return [("extrinsic", reward - intrinsic, p.gamma), ("intrinsic", intrinsic, p.intrinsic_gamma)]
+        return [("combined", reward, p.gamma)]
+
+    def train_belief(self) -> dict:
+        """`vae.updates_per_iteration` steps of the belief's own loss on stored trajectories; their mean losses."""
+        policy, state, vae = self.policy, self.state, self.policy.config.vae
+        if not policy.belief.trainable or not state.trajectories.items:
+            return {}
+        losses = [
+            policy.belief.train_step(state.trajectories.sample(vae.batch_trajectories, policy.generator))
+            for _ in range(vae.updates_per_iteration)
+        ]
+        return {k: float(np.mean([x[k] for x in losses])) for k in losses[0]}
 
     def replayed_inputs(self, n: int) -> BonusInput | None:
         """About `n` transitions from the stored whole trajectories, the belief recomputed by its current model

@@ -80,10 +80,11 @@ def test_train_state_is_the_checkpoint(tmp_path):
 
 def _gae_calls(monkeypatch) -> tuple[list, list]:
     """Spies on the trainer's eq. (4) and GAE calls: (combined rewards, [(stream, gamma, advantages, returns)])."""
+    from hyperstate.agents import rollout as rollout_module
     from hyperstate.agents import trainer as trainer_module
 
     combined, gae = [], []
-    real_combine, real_gae = trainer_module.combine_rewards, trainer_module.compute_gae
+    real_combine, real_gae = trainer_module.combine_rewards, rollout_module.compute_gae
 
     def combine(*args, **kwargs):
         out = real_combine(*args, **kwargs)
@@ -96,7 +97,7 @@ def _gae_calls(monkeypatch) -> tuple[list, list]:
         return adv, ret
 
     monkeypatch.setattr(trainer_module, "combine_rewards", combine)
-    monkeypatch.setattr(trainer_module, "compute_gae", compute)
+    monkeypatch.setattr(rollout_module, "compute_gae", compute)
     return combined, gae
 
 
