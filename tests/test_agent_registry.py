@@ -65,7 +65,7 @@ def registered():
     agents.register_preset("test_trace_rh", config)
     yield "test_trace_rh"
     agents.PRESETS.pop("test_trace_rh")
-    beliefs._BELIEFS.pop("test_reward_trace")
+    beliefs.unregister_belief("test_reward_trace")
 
 
 def _params(agent) -> list[torch.Tensor]:
