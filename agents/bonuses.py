@@ -16,9 +16,9 @@ import torch
 from torch import nn
 
 from hyperstate.agents.config import BonusConfig
-from hyperstate.agents.naming import unknown_name
 from hyperstate.agents.networks import mlp
 from hyperstate.agents.normalization import RunningMeanStd
+from hyperstate.registry import Registry, no_params
 
 
 @dataclasses.dataclass
@@ -121,6 +121,33 @@ class PriorNetwork(nn.Module):
         return self.scale * self.body(embedded)
 
 
+_BONUSES: Registry[type] = Registry("bonus kind", "kinds")
+
+
+def register_bonus(kind: str) -> Callable[[type], type]:
+    """Class decorator: makes a bonus component selectable as `BonusConfig(kind=kind)`.
+
+    The class follows the `Bonus` protocol (`reward`, `update`, `state_dict`, `load_state_dict`; optionally
+    `value` for diagnostics) and has a classmethod `build(config, *, state_columns, belief, generator, name)`
+    returning an instance: `config` is its `BonusConfig` (own settings in `config.params`, which the
+    component validates), `state_columns` the state-vector columns of the config's `state_keys`, `belief`
+    the agent's belief component, `generator` the agent's seeded torch generator, `name` its log name.
+    """
+    _BONUSES.check_free(kind)
+
+    def decorator(cls: type) -> type:
+        _BONUSES.check_free(kind)
+        missing = [m for m in ("build", "reward", "update", "state_dict", "load_state_dict") if not hasattr(cls, m)]
+        if missing:
+            lacks = ", ".join(missing)
+            raise TypeError(f"bonus {kind!r} ({cls.__qualname__}) lacks {lacks} (see agents.bonuses.Bonus)")
+        return _BONUSES.add(kind, cls, owner=cls.__module__)
+
+    return decorator
+
+
+@register_bonus("rnd")
+@register_bonus("ensemble_rnd")
 class EnsembleRND:
     """B prior/predictor pairs; bonus σ² = max(0, mean_i e_i + β var_i e_i − σ_A²), eq. (8)-(9).
 
@@ -130,7 +157,7 @@ class EnsembleRND:
 
     @classmethod
     def build(cls, config: BonusConfig, *, state_columns, belief, generator, name) -> EnsembleRND:
-        _no_params(config)
+        no_params(f"the {config.kind!r} bonus", config.params)
         if config.kind == "rnd" and config.ensemble_size != 1:
             raise ValueError("kind 'rnd' has ensemble_size 1; use kind 'ensemble_rnd' for an ensemble")
         replays = belief.trainable and callable(getattr(belief, "replay_features", None))
@@ -250,12 +277,13 @@ class EnsembleRND:
         return {k: state[k] for k in ("priors", "predictors", "input_stats")}
 
 
+@register_bonus("vae_error")
 class VAEErrorBonus:
     """variBAD's reward-reconstruction error for r_t under a latent sample of the posterior b_t."""
 
     @classmethod
     def build(cls, config: BonusConfig, *, belief, name, **_) -> VAEErrorBonus:
-        _no_params(config)
+        no_params(f"the {config.kind!r} bonus", config.params)
         return cls(belief, name)
 
     def __init__(self, belief, name: str):
@@ -279,44 +307,14 @@ class VAEErrorBonus:
         pass
 
 
-_BONUSES: dict[str, type] = {}
-
-
-def register_bonus(kind: str) -> Callable[[type], type]:
-    """Class decorator: makes a bonus component selectable as `BonusConfig(kind=kind)`.
-
-    The class follows the `Bonus` protocol (`reward`, `update`, `state_dict`, `load_state_dict`; optionally
-    `value` for diagnostics) and has a classmethod `build(config, *, state_columns, belief, generator, name)`
-    returning an instance: `config` is its `BonusConfig` (own settings in `config.params`, which the
-    component validates), `state_columns` the state-vector columns of the config's `state_keys`, `belief`
-    the agent's belief component, `generator` the agent's seeded torch generator, `name` its log name.
-    """
-    if not isinstance(kind, str) or not kind:
-        raise ValueError(f"a bonus kind must be a non-empty string, got {kind!r}")
-
-    def decorator(cls: type) -> type:
-        if kind in _BONUSES:
-            raise ValueError(f"bonus kind {kind!r} is already registered (by {_BONUSES[kind].__module__})")
-        missing = [m for m in ("build", "reward", "update", "state_dict", "load_state_dict") if not hasattr(cls, m)]
-        if missing:
-            lacks = ", ".join(missing)
-            raise TypeError(f"bonus {kind!r} ({cls.__qualname__}) lacks {lacks} (see agents.bonuses.Bonus)")
-        _BONUSES[kind] = cls
-        return cls
-
-    return decorator
-
-
 def bonus_class(kind: str) -> type:
     """The bonus component registered as `kind`."""
-    if kind not in _BONUSES:
-        raise unknown_name("bonus kind", kind, _BONUSES, "kinds")
-    return _BONUSES[kind]
+    return _BONUSES.get(kind)
 
 
 def list_bonuses() -> list[str]:
     """Registered bonus kinds, sorted."""
-    return sorted(_BONUSES)
+    return _BONUSES.names()
 
 
 def make_bonus(
@@ -329,11 +327,6 @@ def make_bonus(
     )
 
 
-def _no_params(config: BonusConfig) -> None:
-    if config.params:
-        raise ValueError(f"the {config.kind!r} bonus takes no params; got {', '.join(map(repr, config.params))}")
-
-
-register_bonus("rnd")(EnsembleRND)
-register_bonus("ensemble_rnd")(EnsembleRND)
-register_bonus("vae_error")(VAEErrorBonus)
+def unregister_bonus(kind: str) -> None:
+    """Removes a registered bonus kind (for tests and interactive sessions)."""
+    _BONUSES.remove(kind)

@@ -22,6 +22,12 @@ def unknown_name(what: str, name: object, known, listing: str) -> ValueError:
     return ValueError(f"unknown {what} {name!r}{hint}; {listing}: {', '.join(known)}")
 
 
+def no_params(what: str, params: dict) -> None:
+    """For components that take no `params` (`what`: "the 'rnd' bonus"): a clear error if some were given."""
+    if params:
+        raise ValueError(f"{what} takes no params; got {', '.join(map(repr, params))}")
+
+
 class Registry(Generic[T]):
     """Name → entry, for one kind of thing (`kind`: "belief"; `listing`: how a miss lists them, "beliefs")."""
 

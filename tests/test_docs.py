@@ -118,7 +118,8 @@ def test_user_bonus_example_registers_and_benchmarks(tmp_path):
         from hyperstate.agents import bonuses as bonus_registry
 
         agents.PRESETS.pop("oracle_count", None)
-        bonus_registry._BONUSES.pop("count", None)
+        if "count" in bonus_registry.list_bonuses():
+            bonus_registry.unregister_bonus("count")
         sys.modules.pop("my_bonus", None)
 
 

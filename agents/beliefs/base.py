@@ -10,6 +10,7 @@ from typing import Protocol
 import torch
 from torch import nn
 
+from hyperstate import registry
 from hyperstate.agents.config import RecurrentConfig, VAEConfig
 from hyperstate.agents.rollout import Rollout
 from hyperstate.registry import Registry
@@ -187,5 +188,4 @@ def unregister_belief(name: str) -> None:
 
 def no_params(name: str, params: dict) -> None:
     """For built-in components, which take no `params`: a clear error if some were given."""
-    if params:
-        raise ValueError(f"the {name!r} component takes no params; got {', '.join(map(repr, params))}")
+    registry.no_params(f"the {name!r} component", params)
