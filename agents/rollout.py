@@ -79,6 +79,49 @@ class Rollout:
         """(T, N)."""
         return tuple(self.rewards.shape)
 
+    def store_step(
+        self,
+        t: int,
+        *,
+        obs: dict[str, np.ndarray],
+        state: torch.Tensor,
+        policy_state: torch.Tensor,
+        next_state: torch.Tensor,
+        features: torch.Tensor,
+        next_features: torch.Tensor,
+        action: torch.Tensor,
+        logprob: torch.Tensor,
+        value: torch.Tensor,
+        reward: torch.Tensor,
+        last: torch.Tensor,
+        bootstrap: torch.Tensor,
+        start: torch.Tensor,
+    ) -> None:
+        """Writes step `t` of every env (`next_values[t]` is the collector's: set at episode ends only)."""
+        for k, v in obs.items():
+            self.raw_obs[k][t] = v
+        self.state[t] = state
+        self.policy_state[t] = policy_state
+        self.next_state[t] = next_state
+        self.features[t] = features
+        self.next_features[t] = next_features
+        self.actions[t] = action
+        self.logprobs[t] = logprob
+        self.values[t] = value
+        self.rewards[t] = reward
+        self.lasts[t] = last
+        self.bootstrap[t] = bootstrap
+        self.starts[t] = start
+
+    def bootstrap_from(self, final_value: torch.Tensor) -> None:
+        """After the last step, given V of the state it ended in: V(s_{t+1}) for steps that did not end an
+        episode is the next step's value; only episode ends bootstrap with the discount the environment
+        gave (and with the value of their final observation, stored during collection)."""
+        ended = self.lasts.bool()
+        following = torch.cat([self.values[1:], final_value[None]])
+        self.next_values.copy_(torch.where(ended[..., None], self.next_values, following))  # every value head
+        self.bootstrap.copy_(torch.where(ended, self.bootstrap, torch.ones_like(self.bootstrap)))
+
     def compute_returns_and_advantages(self, streams: list[tuple[str, np.ndarray, float]], lam: float) -> dict:
         """GAE of each reward stream (name, (T, N) rewards, discount) against its own value head, in order:
         fills `returns` (per head) and `advantages` (their sum: PPO follows all streams). Returns each

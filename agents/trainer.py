@@ -394,34 +394,31 @@ class Trainer:
                     r.next_values[t] = policy.model.value(policy.normalized(next_raw), next_features)
                     bnext = policy.belief.reset_where(bnext, torch.as_tensor(last), policy.tensors(out.observation))
                 clock.mark("belief")
-                for k, v in obs.items():
-                    r.raw_obs[k][t] = v
                 episode_return = episode_return + out.reward
                 completed.extend(episode_return[last].tolist())
                 episode_return = np.where(last, 0.0, episode_return)
-                r.state[t] = torch.as_tensor(raw, dtype=torch.float32)
-                r.policy_state[t] = normalized
-                r.next_state[t] = transition.next_state
-                r.features[t] = features
-                r.next_features[t] = next_features
-                r.actions[t] = action
-                r.logprobs[t] = gaussian_log_prob(noise, std)
-                r.values[t] = value
-                r.rewards[t] = reward[:, 0]
-                r.lasts[t] = torch.as_tensor(last, dtype=torch.float32)
-                r.bootstrap[t] = torch.as_tensor(out.discount, dtype=torch.float32)
-                r.starts[t] = torch.as_tensor(is_start)
+                r.store_step(
+                    t,
+                    obs=obs,
+                    state=torch.as_tensor(raw, dtype=torch.float32),
+                    policy_state=normalized,
+                    next_state=transition.next_state,
+                    features=features,
+                    next_features=next_features,
+                    action=action,
+                    logprob=gaussian_log_prob(noise, std),
+                    value=value,
+                    reward=reward[:, 0],
+                    last=torch.as_tensor(last, dtype=torch.float32),
+                    bootstrap=torch.as_tensor(out.discount, dtype=torch.float32),
+                    start=torch.as_tensor(is_start),
+                )
                 obs, bstate, is_start = out.observation, bnext, last
                 clock.mark("rollout")
             final_value = policy.model.value(
                 policy.normalized(policy.state_vector(obs)), policy.belief.features(bstate)
             )
-            # V(s_{t+1}) for steps that did not end an episode is the next step's value; only episode ends
-            # bootstrap with the discount the environment gave.
-            ended = r.lasts.bool()
-            following = torch.cat([r.values[1:], final_value[None]])
-            r.next_values.copy_(torch.where(ended[..., None], r.next_values, following))  # every value head
-            r.bootstrap.copy_(torch.where(ended, r.bootstrap, torch.ones_like(r.bootstrap)))
+            r.bootstrap_from(final_value)
         clock.mark("inference")
         state.carry = Carry(obs, bstate, is_start, episode_return)
         return completed

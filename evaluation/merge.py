@@ -106,6 +106,15 @@ def plan(into: Path, parts: list[Path], replace: bool = False) -> tuple[dict[str
             copies[cell] = part
             records[cell] = record
             known[cell] = _describe_cell(record, part)
+    problems = grid_problems(known, records)
+    if problems:
+        raise MergeError("the parts do not make one grid:\n  " + "\n  ".join(problems))
+    return copies, known, notes
+
+
+def grid_problems(known: dict[str, dict], records: dict[str, dict]) -> list[str]:
+    """Why `records` (with their sources `known`) are not one grid: budgets, evaluation points or held-out
+    tasks that differ between cells, seeds of one agent trained with different configs. Empty if they are."""
     problems = []
     shared = (("budget", "training budgets"), ("eval_every", "evaluation points"), ("eval_tasks", "held-out tasks"))
     for key, what in shared:
@@ -124,9 +133,7 @@ def plan(into: Path, parts: list[Path], replace: bool = False) -> tuple[dict[str
                     f"{agent} on {task}: seed {other['seed']} was trained with another config than seed "
                     f"{first['seed']} ({'; '.join(differences[:5])}{' ...' if len(differences) > 5 else ''})"
                 )
-    if problems:
-        raise MergeError("the parts do not make one grid:\n  " + "\n  ".join(problems))
-    return copies, known, notes
+    return problems
 
 
 def merge(

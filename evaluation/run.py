@@ -235,45 +235,58 @@ def build_grid(args: argparse.Namespace) -> tuple[list[str], dict[str, dict]]:
         import_modules(args.imports)
     except Exception as e:  # noqa: BLE001  (any failure of user code is reported as a usage error)
         raise UsageError(f"--import: {type(e).__name__}: {e}") from None
-    if args.frames <= 0:
-        raise UsageError(f"--frames must be positive, got {args.frames}")
+    check_numbers(args)
     check_tasks(args.tasks)
-    if args.physics_threads is not None and args.physics_threads < 1:
-        raise UsageError(f"--physics-threads must be positive, got {args.physics_threads}")
     for name in args.agents:
         try:
             protocol.check_name(name)
         except ValueError as e:
             raise UsageError(str(e)) from None
+    config = read_config_files(args.config)
+    names = list(dict.fromkeys(args.agents + ([] if args.no_reference else [REFERENCE_AGENT])))
+    return names, {name: agent_overrides(name, config, args.frames) for name in names}
+
+
+def check_numbers(args: argparse.Namespace) -> None:
+    """The numeric options are in range; UsageError naming the first that is not."""
+    if args.frames <= 0:
+        raise UsageError(f"--frames must be positive, got {args.frames}")
+    if args.physics_threads is not None and args.physics_threads < 1:
+        raise UsageError(f"--physics-threads must be positive, got {args.physics_threads}")
     if args.eval_tasks < 1 or (args.eval_every is not None and args.eval_every < 1):
         raise UsageError("--eval-tasks and --eval-every must be positive")
     if args.video_tasks < 1:
         raise UsageError(f"--video-tasks must be positive, got {args.video_tasks}")
     if args.episodes_per_task is not None and args.episodes_per_task < 1:
         raise UsageError(f"--episodes-per-task must be positive, got {args.episodes_per_task}")
+
+
+def read_config_files(paths: list[Path]) -> dict[str, dict]:
+    """The `--config` files' tables merged in order ({agent or "all": {setting: value}}); tables for
+    presets outside this grid are fine (one file can serve several grids), other names are typos."""
     config: dict[str, dict] = {}
-    for path in args.config:
+    for path in paths:
         for table, values in load_config_file(path).items():
             config[table] = {**config.get(table, {}), **values}
-    names = list(dict.fromkeys(args.agents + ([] if args.no_reference else [REFERENCE_AGENT])))
-    # Tables for presets outside this grid are fine (one file can serve several grids); other names are typos.
     unknown = set(config) - set(protocol.agent_names()) - {"all"}
     if unknown:
         raise UsageError(f"--config has tables for unknown agents: {', '.join(sorted(unknown))}")
-    overrides = {}
-    for name in names:
-        merged = {**config.get("all", {}), **config.get(name, {})}
+    return config
+
+
+def agent_overrides(name: str, config: dict[str, dict], frames: int) -> dict:
+    """Agent `name`'s overrides from the config tables, checked by building it (and its budget)."""
+    merged = {**config.get("all", {}), **config.get(name, {})}
+    try:
+        agent = protocol.make_agent(name, **merged)
+    except (ValueError, TypeError) as e:
+        raise UsageError(f"--config for {name}: {e}") from None
+    if isinstance(getattr(agent, "config", None), agents.AgentConfig):
         try:
-            agent = protocol.make_agent(name, **merged)
-        except (ValueError, TypeError) as e:
-            raise UsageError(f"--config for {name}: {e}") from None
-        if isinstance(getattr(agent, "config", None), agents.AgentConfig):
-            try:
-                agents.check_budget(agent.config, args.frames)
-            except ValueError as e:
-                raise UsageError(f"{name}: {e}") from None
-        overrides[name] = merged
-    return names, overrides
+            agents.check_budget(agent.config, frames)
+        except ValueError as e:
+            raise UsageError(f"{name}: {e}") from None
+    return merged
 
 
 def incompatible_cells(args: argparse.Namespace, names: list[str], overrides: dict[str, dict]) -> dict:
@@ -497,35 +510,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{program_name()}: error: no agent of the grid can run on its tasks", file=sys.stderr)
         return 2
     workers = args.workers or max(1, (os.cpu_count() or 1) // 2)
-    # Parallel local cells share the cores; --physics-threads overrides the share.
-    physics_threads = args.physics_threads or 0
-    if not physics_threads and args.executor == "local" and workers > 1:
-        physics_threads = max(1, (os.cpu_count() or 1) // workers)
-    specs = []
-    cells = [(n, t, s) for t in args.tasks for n in names for s in args.seeds if (n, t) not in skipped]
-    for i, (name, task, seed) in enumerate(cells):
-        specs.append(
-            CellSpec(
-                name,
-                task,
-                seed,
-                args.frames,
-                eval_every,
-                args.eval_tasks,
-                args.episodes_per_task,
-                dict(overrides[name]),
-                str(args.out),
-                args.resume,
-                False,  # cells draw nothing: the driver's GridProgress shows them all
-                i + 1,
-                tuple(args.imports),
-                # Parallel cells share the cores: each cell's physics gets its share.
-                physics_threads=physics_threads,
-                storage=str(args.storage or args.out),
-                # Ray cells may run where the user's files are not: they take the driver's copies along.
-                import_sources=read_import_sources(args.imports) if args.executor == "ray" else (),
-            )
-        )
+    specs = cell_specs(args, names, overrides, skipped, eval_every, workers)
     started = time.perf_counter()
     try:
         if args.executor == "ray":
@@ -541,6 +526,53 @@ def main(argv: list[str] | None = None) -> int:
     except UsageError as e:
         print(f"{program_name()}: error: {e}", file=sys.stderr)
         return 2
+    records, rows = report(args)
+    print()
+    print(text_table(rows))
+    print(f"\n{len(records)} cells in {time.perf_counter() - started:.0f} s; results in {args.out}/")
+    if failures:
+        print(f"{program_name()}: {len(failures)} cell(s) failed:", *failures, sep="\n  ", file=sys.stderr)
+        return 1
+    return 0
+
+
+def cell_specs(
+    args: argparse.Namespace, names: list[str], overrides: dict, skipped: dict, eval_every: int, workers: int
+) -> list[CellSpec]:
+    """One `CellSpec` per runnable (agent, task, seed), tasks outermost."""
+    # Parallel local cells share the cores; --physics-threads overrides the share.
+    physics_threads = args.physics_threads or 0
+    if not physics_threads and args.executor == "local" and workers > 1:
+        physics_threads = max(1, (os.cpu_count() or 1) // workers)
+    cells = [(n, t, s) for t in args.tasks for n in names for s in args.seeds if (n, t) not in skipped]
+    return [
+        CellSpec(
+            name,
+            task,
+            seed,
+            args.frames,
+            eval_every,
+            args.eval_tasks,
+            args.episodes_per_task,
+            dict(overrides[name]),
+            str(args.out),
+            args.resume,
+            False,  # cells draw nothing: the driver's GridProgress shows them all
+            i + 1,
+            tuple(args.imports),
+            # Parallel cells share the cores: each cell's physics gets its share.
+            physics_threads=physics_threads,
+            storage=str(args.storage or args.out),
+            # Ray cells may run where the user's files are not: they take the driver's copies along.
+            import_sources=read_import_sources(args.imports) if args.executor == "ray" else (),
+        )
+        for i, (name, task, seed) in enumerate(cells)
+    ]
+
+
+def report(args: argparse.Namespace) -> tuple[list[dict], list[dict]]:
+    """The grid-level files from every cell on disk: results.json, summary.csv, figures, diagnostics and
+    videos as asked; returns the records and the summary rows."""
     write_results(args.out)
     records = load_records(args.out)
     rows = write_summary(args.out, records)
@@ -549,13 +581,7 @@ def main(argv: list[str] | None = None) -> int:
         write_diagnostics(args.out, records)
     if args.video:
         render_videos(args)
-    print()
-    print(text_table(rows))
-    print(f"\n{len(records)} cells in {time.perf_counter() - started:.0f} s; results in {args.out}/")
-    if failures:
-        print(f"{program_name()}: {len(failures)} cell(s) failed:", *failures, sep="\n  ", file=sys.stderr)
-        return 1
-    return 0
+    return records, rows
 
 
 if __name__ == "__main__":
