@@ -3,7 +3,8 @@
     .venv/bin/python scripts/bit_identity.py save before.pt      # on the commit before the change
     .venv/bin/python scripts/bit_identity.py compare before.pt   # on the change: exit 1 if anything differs
 
-Trains `hyperx`, `oracle_rh`, `rl2` and `varibad_rh` on cheetah_dir_sparse for 6,400 frames (8 envs, seed 3,
+Trains `PRESETS` (between them every network style, minibatch unit, advantage normalisation, value
+loss and bonus training source) on cheetah_dir_sparse for 6,400 frames (8 envs, seed 3,
 one torch and one physics thread) and keeps every module state and every iteration's log (times left out).
 Floats depend on the processor: compare files made on one machine.
 """
@@ -21,7 +22,7 @@ import torch  # noqa: E402
 
 from hyperstate import agents  # noqa: E402
 
-PRESETS = ("hyperx", "oracle_rh", "rl2", "varibad_rh")
+PRESETS = ("hyperx", "oracle_rh", "rl2", "varibad_rh", "hyperx_paper", "oracle_paper", "hyperx_icml")  # every strategy
 TIMING = ("time", "fps", "wall")
 
 
