@@ -94,6 +94,23 @@ class InputSelector:
         return torch.cat(parts, dim=-1)
 
 
+class RunningInputNorm:
+    """RND's input normalisation: by the running mean and std of every input seen, clipped to ±5."""
+
+    def __init__(self, stats: RunningMeanStd):
+        self.stats = stats
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        return self.stats.normalize(x, clip=5.0).float()
+
+
+class RawInputs:
+    """Inputs as they are (`input_norm="none"`)."""
+
+    def __call__(self, x: torch.Tensor) -> torch.Tensor:
+        return x.float()
+
+
 class PriorNetwork(nn.Module):
     """RND's fixed random network f: each input part embedded separately, then an MLP.
 
@@ -181,15 +198,14 @@ class EnsembleRND:
         self.optimizer = torch.optim.Adam(self.predictors.parameters(), lr=config.lr)
         self.input_stats = RunningMeanStd((selector.dim,))
         # Trained on replayed trajectories, the predictor keeps no inputs of its own.
-        kept = 0 if config.train_on == "replay" else config.buffer_size
+        replay = config.train_on == "replay"
+        kept = 0 if replay else config.buffer_size
         self.buffer = np.zeros((kept, selector.dim), np.float32)
         self.buffer_len = 0
         self.buffer_pos = 0
-
-    def _normalized(self, x: torch.Tensor) -> torch.Tensor:
-        if self.config.input_norm == "none":
-            return x.float()
-        return self.input_stats.normalize(x, clip=5.0).float()
+        # Strategies chosen once: how inputs reach the networks, where the predictor's minibatches come from.
+        self.normalize = RawInputs() if config.input_norm == "none" else RunningInputNorm(self.input_stats)
+        self._training_minibatches = self._replayed_minibatches if replay else self._buffered_minibatches
 
     def errors(self, x: torch.Tensor) -> torch.Tensor:
         """(B, M) squared prediction errors of each ensemble member on normalised inputs x."""
@@ -207,17 +223,19 @@ class EnsembleRND:
         # Inputs are normalised with statistics that include this rollout (as RND does).
         self.input_stats.update(x.numpy())
         with torch.no_grad():
-            return self.uncertainty(self.errors(self._normalized(x)), self.config.beta, self.config.aleatoric)
+            return self.uncertainty(self.errors(self.normalize(x)), self.config.beta, self.config.aleatoric)
 
     def value(self, batch: BonusInput) -> torch.Tensor:
         """The bonus at these inputs under the current statistics, learning nothing from them."""
         with torch.no_grad():
-            x = self._normalized(self.selector(batch))
+            x = self.normalize(self.selector(batch))
             return self.uncertainty(self.errors(x), self.config.beta, self.config.aleatoric)
 
     def update(self, batch: BonusInput) -> dict[str, float]:
-        if self.config.train_on == "replay":
-            return self._fit([self._replayed(batch) for _ in range(self.config.updates_per_iteration)])
+        return self._fit(self._training_minibatches(batch))
+
+    def _buffered_minibatches(self, batch: BonusInput) -> list[torch.Tensor]:
+        """The rollout's inputs into the ring buffer; `updates_per_iteration` minibatches drawn from it."""
         x = self.selector(batch).numpy().astype(np.float32)
         n = len(x)
         idx = (self.buffer_pos + np.arange(n)) % self.config.buffer_size
@@ -228,7 +246,11 @@ class EnsembleRND:
         for _ in range(self.config.updates_per_iteration):
             rows = torch.randint(self.buffer_len, (self.config.batch_size,), generator=self.generator)
             minibatches.append(torch.from_numpy(self.buffer[rows.numpy()]))
-        return self._fit(minibatches)
+        return minibatches
+
+    def _replayed_minibatches(self, batch: BonusInput) -> list[torch.Tensor]:
+        """`updates_per_iteration` minibatches of replayed trajectories (`train_on="replay"`)."""
+        return [self._replayed(batch) for _ in range(self.config.updates_per_iteration)]
 
     def _replayed(self, batch: BonusInput) -> torch.Tensor:
         """One minibatch of replayed inputs; until the belief has stored a whole trajectory, rows of `batch`."""
@@ -242,7 +264,7 @@ class EnsembleRND:
         """One predictor step per minibatch of raw inputs."""
         losses = []
         for x in minibatches:
-            loss = self.errors(self._normalized(x)).mean()
+            loss = self.errors(self.normalize(x)).mean()
             self.optimizer.zero_grad()
             loss.backward()
             self.optimizer.step()

@@ -74,14 +74,14 @@ def test_rnd_bonus_falls_on_repeated_inputs_and_stays_high_on_novel_ones():
     seen = _batch(torch.linspace(-1, 1, 200)[:, None])
     novel = _batch(torch.linspace(4, 6, 200)[:, None])
     rnd.input_stats.update(np.linspace(-6, 6, 1000)[:, None])  # fixed normalisation for the comparison
-    before_seen = rnd.errors(rnd._normalized(seen.next_state)).mean().item()
-    before_novel = rnd.errors(rnd._normalized(novel.next_state)).mean().item()
+    before_seen = rnd.errors(rnd.normalize(seen.next_state)).mean().item()
+    before_novel = rnd.errors(rnd.normalize(novel.next_state)).mean().item()
     stats = rnd.input_stats.state_dict()
     for _ in range(6):
         rnd.update(seen)
     rnd.input_stats.load_state_dict(stats)
-    after_seen = rnd.errors(rnd._normalized(seen.next_state)).mean().item()
-    after_novel = rnd.errors(rnd._normalized(novel.next_state)).mean().item()
+    after_seen = rnd.errors(rnd.normalize(seen.next_state)).mean().item()
+    after_novel = rnd.errors(rnd.normalize(novel.next_state)).mean().item()
     assert after_seen < 0.1 * before_seen
     assert after_novel > 5 * after_seen
     assert after_novel > 0.3 * before_novel
@@ -104,7 +104,7 @@ def test_ensemble_rnd_reward_is_eq_9_of_member_errors():
     state = torch.randn(32, 3)
     belief = torch.softmax(torch.randn(32, 2), -1)
     bonus = rnd.reward(_batch(state, belief))
-    x = rnd._normalized(torch.cat([state[:, 1:2], belief], -1))
+    x = rnd.normalize(torch.cat([state[:, 1:2], belief], -1))
     e = torch.stack([(g(x) - f(x)).pow(2).mean(-1) for f, g in zip(rnd.priors, rnd.predictors, strict=True)])
     want = torch.clamp(e.mean(0) + 0.5 * e.var(0, unbiased=False) - 0.1, min=0)
     torch.testing.assert_close(bonus, want)

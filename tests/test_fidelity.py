@@ -289,7 +289,7 @@ def test_rnd_trained_on_replay_steps_on_replayed_minibatches_only():
     rnd.update(dataclasses.replace(collected, replay=replay))
     assert asked == [8, 8, 8] and rnd.buffer_len == 0  # the collected inputs are not stored
     for minibatch in replays:  # the same three Adam steps by hand, on the replayed inputs
-        loss = twin.errors(twin._normalized(twin.selector(minibatch))).mean()
+        loss = twin.errors(twin.normalize(twin.selector(minibatch))).mean()
         twin.optimizer.zero_grad()
         loss.backward()
         twin.optimizer.step()
