@@ -35,6 +35,7 @@ from hyperstate.agents.presets import (
     get_preset,
     list_presets,
     register_preset,
+    unregister_preset,
 )
 
 
@@ -73,4 +74,5 @@ __all__ = [
     "register_belief",
     "register_bonus",
     "register_preset",
+    "unregister_preset",
 ]

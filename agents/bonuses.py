@@ -331,7 +331,7 @@ class VAEErrorBonus:
 
 def bonus_class(kind: str) -> type:
     """The bonus component registered as `kind`."""
-    return _BONUSES.get(kind)
+    return _BONUSES.lookup(kind)
 
 
 def list_bonuses() -> list[str]:

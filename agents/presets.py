@@ -9,9 +9,10 @@
 from __future__ import annotations
 
 import dataclasses
+import inspect
 
 from hyperstate.agents.config import AgentConfig, BonusConfig, PPOConfig, VAEConfig
-from hyperstate.agents.naming import unknown_name
+from hyperstate.registry import Registry
 
 # The seed paper's literal settings (appendix C) and this project's first defaults: CleanRL's PPO and network,
 # the learning rate annealed over the run's budget, RND predictors trained once per iteration on 10,000 inputs.
@@ -44,7 +45,7 @@ _ICML_RND = BonusConfig(input="hyperstate", input_norm="none", prior_scaling="we
 
 # The validated agents: the defaults of PPOConfig and BonusConfig, which are the agents of the committed
 # turn-around grid (docs/results/fig2_turnaround, tested field for field against its records).
-PRESETS: dict[str, AgentConfig] = {
+_BUILT_IN: dict[str, AgentConfig] = {
     "ppo": AgentConfig(belief="none"),
     # RL²'s GRU is trained through time by the policy's loss: minibatches of whole env sequences.
     "rl2": AgentConfig(belief="recurrent", ppo=PPOConfig(lr=3e-4, minibatch_unit="envs")),
@@ -99,21 +100,26 @@ def paper_variant(config: AgentConfig) -> AgentConfig:
     return dataclasses.replace(config, ppo=ppo, bonuses=bonuses)
 
 
-PRESETS.update({f"{name}_paper": paper_variant(PRESETS[name]) for name in GRID_PRESETS})
+_BUILT_IN.update({f"{name}_paper": paper_variant(_BUILT_IN[name]) for name in GRID_PRESETS})
+PRESETS: Registry[AgentConfig] = Registry("agent preset", "presets")
+for _name, _config in _BUILT_IN.items():
+    PRESETS.add(_name, _config, owner=__name__)
 
 
 def register_preset(name: str, config: AgentConfig) -> AgentConfig:
     """Names an `AgentConfig` (built-in or your own components) so that `agents.make(name)`,
     `evaluation/run.py --agents name` and `--config` tables use it. Returns the config."""
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"a preset name must be a non-empty string, got {name!r}")
+    PRESETS.check_free(name)
     if not isinstance(config, AgentConfig):
         raise TypeError(f"preset {name!r} must be an agents.AgentConfig, got {type(config).__name__}")
-    if name in PRESETS:
-        raise ValueError(f"preset {name!r} is already registered")
     check_components(config)
-    PRESETS[name] = config
-    return config
+    caller = inspect.currentframe().f_back
+    return PRESETS.add(name, config, owner=caller.f_globals.get("__name__", "?") if caller else "?")
+
+
+def unregister_preset(name: str) -> None:
+    """Removes a registered preset (for tests and interactive sessions)."""
+    PRESETS.remove(name)
 
 
 def check_components(config: AgentConfig) -> None:
@@ -127,10 +133,8 @@ def check_components(config: AgentConfig) -> None:
 
 
 def list_presets() -> list[str]:
-    return sorted(PRESETS)
+    return PRESETS.names()
 
 
 def get_preset(name: str) -> AgentConfig:
-    if name not in PRESETS:
-        raise unknown_name("agent preset", name, PRESETS, "presets")
-    return PRESETS[name]
+    return PRESETS.lookup(name)

@@ -40,7 +40,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from hyperstate import agents
-from hyperstate.agents.naming import unknown_name
+from hyperstate.registry import Registry, unknown_name
 
 
 class BenchmarkAgent(Protocol):
@@ -62,7 +62,7 @@ class AgentEntry:
     loader: Callable[[str | os.PathLike], Any] | None
 
 
-_AGENTS: dict[str, AgentEntry] = {}
+_AGENTS: Registry[AgentEntry] = Registry("agent", "agents")
 
 
 def register_agent(
@@ -73,13 +73,13 @@ def register_agent(
     `loader(path) -> agent` reloads what the agent's `save` wrote; by default the `load` classmethod of
     the class the factory returns. Names of built-in presets (`agents.PRESETS`) are taken.
     """
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"an agent name must be a non-empty string, got {name!r}")
+    _AGENTS.check_free(name)
 
     def decorator(factory: Callable[..., Any]) -> Callable[..., Any]:
-        if name in _AGENTS or name in agents.PRESETS:
-            raise ValueError(f"agent {name!r} is already registered")
-        _AGENTS[name] = AgentEntry(name, factory, loader)
+        _AGENTS.check_free(name)
+        if name in agents.PRESETS:
+            raise ValueError(f"agent {name!r} is already registered (as a preset of hyperstate.agents)")
+        _AGENTS.add(name, AgentEntry(name, factory, loader), owner=getattr(factory, "__module__", "?"))
         return factory
 
     return decorator
@@ -87,7 +87,7 @@ def register_agent(
 
 def unregister_agent(name: str) -> None:
     """Removes an agent registered with `register_agent` (mainly for tests and notebooks)."""
-    _AGENTS.pop(name)
+    _AGENTS.remove(name)
 
 
 def agent_names() -> list[str]:

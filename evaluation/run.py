@@ -26,7 +26,6 @@ from typing import Any
 os.environ.setdefault("MUJOCO_GL", "disable")
 
 from hyperstate import agents, suite
-from hyperstate.agents.naming import unknown_name
 from hyperstate.evaluation import cli, protocol
 from hyperstate.evaluation import grid as grid_layout
 from hyperstate.evaluation.cell import CellSpec, load_records, report_failure, run_cell, write_results
@@ -34,6 +33,7 @@ from hyperstate.evaluation.imports import import_modules, read_import_sources
 from hyperstate.evaluation.progress import POLL_SECONDS, RESULTS_EVERY_SECONDS, GridProgress
 from hyperstate.evaluation.report import REFERENCE_AGENT, text_table, write_figures, write_summary
 from hyperstate.files import write_json_atomic
+from hyperstate.registry import unknown_name
 
 
 class UsageError(Exception):

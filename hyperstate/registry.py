@@ -8,8 +8,8 @@ took it (`belief 'oracle' is already registered (by hyperstate.agents.beliefs.or
 from __future__ import annotations
 
 import difflib
-from collections.abc import Iterator
-from typing import Generic, TypeVar
+from collections.abc import Iterator, Mapping
+from typing import TypeVar
 
 T = TypeVar("T")
 
@@ -28,8 +28,10 @@ def no_params(what: str, params: dict) -> None:
         raise ValueError(f"{what} takes no params; got {', '.join(map(repr, params))}")
 
 
-class Registry(Generic[T]):
-    """Name → entry, for one kind of thing (`kind`: "belief"; `listing`: how a miss lists them, "beliefs")."""
+class Registry(Mapping[str, T]):
+    """Name → entry, for one kind of thing (`kind`: "belief"; `listing`: how a miss lists them, "beliefs").
+    Read like a mapping (`registry[name]`, `name in registry`, iteration in sorted order); `lookup` is the
+    read that explains a miss; entries come and go through `add` and `remove` only."""
 
     def __init__(self, kind: str, listing: str):
         self.kind, self.listing = kind, listing
@@ -50,7 +52,7 @@ class Registry(Generic[T]):
         self._owners[name] = owner
         return entry
 
-    def get(self, name: str) -> T:
+    def lookup(self, name: str) -> T:
         """The entry registered as `name`; ValueError with close names on a miss."""
         try:
             return self._entries[name]
@@ -59,12 +61,15 @@ class Registry(Generic[T]):
 
     def remove(self, name: str) -> None:
         """Unregisters `name` (for tests and interactive sessions)."""
-        self.get(name)
+        self.lookup(name)
         del self._entries[name], self._owners[name]
 
     def names(self) -> list[str]:
         """The registered names, sorted."""
         return sorted(self._entries)
+
+    def __getitem__(self, name: str) -> T:
+        return self._entries[name]
 
     def __contains__(self, name: object) -> bool:
         return name in self._entries

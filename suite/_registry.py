@@ -13,13 +13,13 @@ return estimator. A task that declares none of these gets none of them; the harn
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import inspect
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from hyperstate.registry import Registry
 from hyperstate.suite._batch import BatchEnv, LoopBatch
 from hyperstate.suite._seeding import SeedLike, spawn_seeds
 
@@ -117,7 +117,7 @@ class TaskEntry:
     top_down: TopDownView | None = None
 
 
-_REGISTRY: dict[str, TaskEntry] = {}
+_REGISTRY: Registry[TaskEntry] = Registry("task", "registered tasks")
 
 # Live, sorted view of the registered names (a list, so `name in suite.TASKS` and printing both work).
 TASKS: list[str] = []
@@ -156,8 +156,7 @@ def register(
     so that a high mean return cannot hide seeds that did not (`summary.csv`'s `success_share`);
     `top_down` (a `TopDownView`), if given, is the plane the behaviour plot draws a two-number position in.
     """
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"task name must be a non-empty string, got {name!r}")
+    _REGISTRY.check_free(name)
     for value, kind, what in (
         (position_axis, PositionAxis, "position_axis"),
         (coverage, Coverage, "coverage"),
@@ -172,11 +171,10 @@ def register(
         raise ValueError(f"reference_task must be another task's name, got {reference_task!r}")
 
     def decorator(factory: Factory) -> Factory:
-        if name in _REGISTRY:
-            raise ValueError(f"task {name!r} is already registered (by {_REGISTRY[name].factory.__module__})")
+        _REGISTRY.check_free(name)
         if "seed" not in inspect.signature(factory).parameters:
             raise TypeError(f"factory for {name!r} must accept a `seed` keyword argument")
-        _REGISTRY[name] = TaskEntry(
+        entry = TaskEntry(
             name,
             factory,
             batch,
@@ -189,7 +187,8 @@ def register(
             success,
             top_down,
         )
-        TASKS[:] = sorted(_REGISTRY)
+        _REGISTRY.add(name, entry, owner=factory.__module__)
+        TASKS[:] = _REGISTRY.names()
         return factory
 
     return decorator
@@ -197,9 +196,8 @@ def register(
 
 def unregister(name: str) -> None:
     """Removes a registered task (mainly for tests and interactive sessions)."""
-    _lookup(name)
-    del _REGISTRY[name]
-    TASKS[:] = sorted(_REGISTRY)
+    _REGISTRY.remove(name)
+    TASKS[:] = _REGISTRY.names()
 
 
 def exploration_metrics(name: str) -> Callable[..., dict] | None:
@@ -256,12 +254,7 @@ def list_tasks() -> list[str]:
 
 
 def _lookup(name: str) -> TaskEntry:
-    try:
-        return _REGISTRY[name]
-    except KeyError:
-        close = difflib.get_close_matches(str(name), TASKS, n=3)
-        hint = f" (did you mean {', '.join(close)}?)" if close else ""
-        raise ValueError(f"unknown task {name!r}{hint}; registered tasks: {', '.join(TASKS)}") from None
+    return _REGISTRY.lookup(name)
 
 
 def _check_kwargs(name: str, factory: Callable[..., Any], kwargs: dict[str, Any]) -> None:

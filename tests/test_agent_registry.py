@@ -64,7 +64,7 @@ def registered():
     )
     agents.register_preset("test_trace_rh", config)
     yield "test_trace_rh"
-    agents.PRESETS.pop("test_trace_rh")
+    agents.unregister_preset("test_trace_rh")
     beliefs.unregister_belief("test_reward_trace")
 
 

@@ -117,7 +117,8 @@ def test_user_bonus_example_registers_and_benchmarks(tmp_path):
         from hyperstate import agents
         from hyperstate.agents import bonuses as bonus_registry
 
-        agents.PRESETS.pop("oracle_count", None)
+        if "oracle_count" in agents.PRESETS:
+            agents.unregister_preset("oracle_count")
         if "count" in bonus_registry.list_bonuses():
             bonus_registry.unregister_bonus("count")
         sys.modules.pop("my_bonus", None)

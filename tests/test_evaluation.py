@@ -593,7 +593,7 @@ def test_campaign_configs_change_what_they_say_on_the_campaigns_agents(path):
             assert node == value, key
     finally:
         for name in set(agents.PRESETS) - registered:  # whatever the imported files registered
-            agents.PRESETS.pop(name)
+            agents.unregister_preset(name)
         for module in ("fig2_presets", "campaign_presets"):
             sys.modules.pop(module, None)
 

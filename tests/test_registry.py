@@ -56,20 +56,22 @@ class SparseSliderGoal(MetaTask):
         return collections.OrderedDict(position=physics.data.qpos.copy(), velocity=physics.data.qvel.copy())
 
 
+def slider_goal(seed=None, episodes_per_task=2, episode_length=40, privileged=False):
+    """The slider task's factory, registered by the fixtures below."""
+    physics = mujoco.Physics.from_xml_string(SLIDER_XML)
+    task = SparseSliderGoal(
+        GoalPrior(),
+        episode_length=episode_length,
+        episodes_per_task=episodes_per_task,
+        privileged=privileged,
+        random=seed,
+    )
+    return control.Environment(physics, task)
+
+
 @pytest.fixture
 def slider_task():
-    @suite.register("test_slider_goal_sparse")
-    def slider_goal(seed=None, episodes_per_task=2, episode_length=40, privileged=False):
-        physics = mujoco.Physics.from_xml_string(SLIDER_XML)
-        task = SparseSliderGoal(
-            GoalPrior(),
-            episode_length=episode_length,
-            episodes_per_task=episodes_per_task,
-            privileged=privileged,
-            random=seed,
-        )
-        return control.Environment(physics, task)
-
+    suite.register("test_slider_goal_sparse")(slider_goal)
     yield "test_slider_goal_sparse"
     suite.unregister("test_slider_goal_sparse")
 
@@ -155,7 +157,7 @@ SLIDER_AXIS = suite.PositionAxis("position", "cart position (m)", symbol="x", un
 @pytest.fixture
 def declared_slider(slider_task):
     """The slider again, declaring a position axis, a coverage grid and a Bayes-optimal estimator."""
-    factory = suite._registry._REGISTRY[slider_task].factory
+    factory = slider_goal
     suite.register(
         "test_slider_declared",
         position_axis=SLIDER_AXIS,

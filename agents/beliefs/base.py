@@ -150,7 +150,7 @@ def register_belief(name: str) -> Callable[[type], type]:
 
 def belief_class(name: str) -> type:
     """The belief component registered as `name` (its capabilities are class attributes)."""
-    return _BELIEFS.get(name)
+    return _BELIEFS.lookup(name)
 
 
 def list_beliefs() -> list[str]:

@@ -32,19 +32,26 @@ from hyperstate.agents.presets import HYPERSTATE_BONUS
 
 # The campaign's `oracle_rh` was the seed paper's, today `oracle_rh_paper`.
 _oracle_rh = agents.PRESETS["oracle_rh_paper"]
-agents.PRESETS["oracle_rh_prior20"] = dataclasses.replace(
-    _oracle_rh, bonuses=(dataclasses.replace(_oracle_rh.bonuses[0], prior_scale=20.0),)
+agents.register_preset(
+    "oracle_rh_prior20",
+    dataclasses.replace(_oracle_rh, bonuses=(dataclasses.replace(_oracle_rh.bonuses[0], prior_scale=20.0),)),
 )
 
 _oracle_rh_icml = agents.PRESETS["oracle_rh_icml"]
-agents.PRESETS["oracle_rh_icml_seed_bonus"] = dataclasses.replace(
-    _oracle_rh_icml,
-    bonuses=(dataclasses.replace(HYPERSTATE_BONUS, updates_per_iteration=4, buffer_size=100_000),),
-    anneal_bonus=False,
+agents.register_preset(
+    "oracle_rh_icml_seed_bonus",
+    dataclasses.replace(
+        _oracle_rh_icml,
+        bonuses=(dataclasses.replace(HYPERSTATE_BONUS, updates_per_iteration=4, buffer_size=100_000),),
+        anneal_bonus=False,
+    ),
 )
-agents.PRESETS["oracle_rh_icml_seed_ppo"] = dataclasses.replace(
-    _oracle_rh_icml,
-    ppo=dataclasses.replace(
-        _oracle_rh_icml.ppo, num_envs=32, minibatch_unit="envs", advantage_norm="minibatch", value_loss="mse"
+agents.register_preset(
+    "oracle_rh_icml_seed_ppo",
+    dataclasses.replace(
+        _oracle_rh_icml,
+        ppo=dataclasses.replace(
+            _oracle_rh_icml.ppo, num_envs=32, minibatch_unit="envs", advantage_norm="minibatch", value_loss="mse"
+        ),
     ),
 )

@@ -22,7 +22,8 @@ from hyperstate import agents
 # configs/ overlays are named after the campaign's names, e.g. [oracle_rh]: see research/turnaround/README.md).
 _oracle_rh = agents.PRESETS["oracle_rh_paper"]
 (STATE_BONUS,) = agents.PRESETS["oracle_rs_paper"].bonuses
-agents.PRESETS["oracle_rh_prior5"] = dataclasses.replace(
-    _oracle_rh, bonuses=(dataclasses.replace(_oracle_rh.bonuses[0], prior_scale=5.0),)
+agents.register_preset(
+    "oracle_rh_prior5",
+    dataclasses.replace(_oracle_rh, bonuses=(dataclasses.replace(_oracle_rh.bonuses[0], prior_scale=5.0),)),
 )
-agents.PRESETS["oracle_rh_rs"] = dataclasses.replace(_oracle_rh, bonuses=(*_oracle_rh.bonuses, STATE_BONUS))
+agents.register_preset("oracle_rh_rs", dataclasses.replace(_oracle_rh, bonuses=(*_oracle_rh.bonuses, STATE_BONUS)))
