@@ -10,11 +10,10 @@ BAMDP episode, RNGs), so a run resumed from its checkpoint continues exactly whe
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
@@ -25,181 +24,14 @@ from tqdm.auto import tqdm
 from hyperstate import suite
 from hyperstate.agents import config as config_lib
 from hyperstate.agents import serialization
-from hyperstate.agents.beliefs import Trajectories, Transition
+from hyperstate.agents.beliefs import Transition
 from hyperstate.agents.bonuses import BonusInput
-from hyperstate.agents.config import BonusConfig
 from hyperstate.agents.normalization import ReturnScaler
 from hyperstate.agents.policy import Policy
 from hyperstate.agents.ppo import gaussian_log_prob, ppo_update
+from hyperstate.agents.rewards import bonus_anneal_factor, combine_rewards, intrinsic_discount  # noqa: F401
 from hyperstate.agents.rollout import Rollout
-
-
-def combine_rewards(
-    extrinsic: np.ndarray,
-    bonuses: list[np.ndarray],
-    *,
-    weights: list[float],
-    anneal: float | Sequence[float],
-    lasts: np.ndarray,
-    ext_scaler: ReturnScaler | None,
-    bonus_scalers: list[ReturnScaler],
-    reward_clip: float,
-    bonus_clips: Sequence[float | None] | None = None,
-) -> tuple[np.ndarray, list[np.ndarray]]:
-    """Eq. (4): r + Σ_i λ_i r_i, each stream divided by the std of its own running discounted return.
-
-    The extrinsic stream is normalised and clipped to ±`reward_clip` (unless `ext_scaler` is None);
-    each bonus is normalised, clipped to ±`bonus_clips[i]` where one is given, weighted, and multiplied by
-    its annealing factor (`anneal`: one for all bonuses, or one per bonus; 1 − progress when annealing).
-    Returns the combined (T, N) reward and the normalised (and clipped) bonuses.
-    """
-    anneals = [float(anneal)] * len(bonuses) if np.isscalar(anneal) else list(anneal)
-    clips = list(bonus_clips) if bonus_clips is not None else [None] * len(bonuses)
-    reward = extrinsic
-    if ext_scaler is not None:
-        reward = np.clip(ext_scaler.scale(extrinsic, lasts), -reward_clip, reward_clip)
-    scaled = [scaler.scale(b, lasts) for b, scaler in zip(bonuses, bonus_scalers, strict=True)]
-    scaled = [b if clip is None else np.clip(b, -clip, clip) for b, clip in zip(scaled, clips, strict=True)]
-    for weight, factor, b in zip(weights, anneals, scaled, strict=True):
-        reward = reward + factor * weight * b
-    return reward, scaled
-
-
-def bonus_anneal_factor(bonus: BonusConfig, anneal_all: bool, progress: float) -> float:
-    """The weight multiplier of one bonus at `progress` (0 at the start of training, 1 at the end): linear
-    to 0 at `bonus.anneal_until`, or over the whole run when the agent anneals every bonus; else 1."""
-    until = bonus.anneal_until if bonus.anneal_until is not None else (1.0 if anneal_all else None)
-    return 1.0 if until is None else max(0.0, 1.0 - progress / until)
-
-
-def intrinsic_discount(p: config_lib.PPOConfig) -> float:
-    """The discount of the bonuses' returns: the policy's, or the intrinsic value head's."""
-    return p.gamma if p.intrinsic_gamma is None else p.intrinsic_gamma
-
-
-class PhaseClock:
-    """Wall time per phase of an iteration, for the log's `time/<phase>` breakdown (seconds): `mark(name)`
-    charges the time since the previous mark to `name`. A few `perf_counter` calls per step; nothing
-    it measures feeds back into training, so results do not depend on it."""
-
-    PHASES = ("inference", "physics", "belief", "rollout", "bonus", "returns", "ppo", "belief_training")
-
-    def __init__(self) -> None:
-        self.totals = dict.fromkeys(self.PHASES, 0.0)
-        self.last = time.perf_counter()
-
-    def start(self) -> None:
-        self.last = time.perf_counter()
-
-    def mark(self, phase: str) -> None:
-        now = time.perf_counter()
-        self.totals[phase] += now - self.last
-        self.last = now
-
-    def lap(self) -> dict[str, float]:
-        """The breakdown since the previous lap, as log entries; starts the next one."""
-        out = {f"time/{phase}": seconds for phase, seconds in self.totals.items()}
-        self.totals = dict.fromkeys(self.PHASES, 0.0)
-        return out
-
-
-class TrajectoryBuffer:
-    """Whole BAMDP episodes for belief training (FIFO, `capacity` trajectories)."""
-
-    def __init__(self, capacity: int):
-        self.capacity = capacity
-        self.items: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray | None]] = []
-
-    def add(self, states, actions, rewards, tasks) -> None:
-        for i in range(states.shape[1]):
-            self.items.append((states[:, i], actions[:, i], rewards[:, i], None if tasks is None else tasks[i]))
-        del self.items[: max(0, len(self.items) - self.capacity)]
-
-    def sample(self, n: int, generator: torch.Generator) -> Trajectories:
-        idx = torch.randint(len(self.items), (n,), generator=generator).tolist()
-        s, a, r, k = zip(*(self.items[i] for i in idx), strict=True)
-        tasks = None if k[0] is None else torch.as_tensor(np.stack(k), dtype=torch.float32)
-        return Trajectories(
-            torch.as_tensor(np.stack(s), dtype=torch.float32),
-            torch.as_tensor(np.stack(a), dtype=torch.float32),
-            torch.as_tensor(np.stack(r), dtype=torch.float32)[..., None],
-            tasks,
-        )
-
-
-@dataclasses.dataclass
-class Carry:
-    """What one iteration hands the next: the current observation, belief state and episode bookkeeping."""
-
-    obs: dict[str, np.ndarray]
-    belief: Any
-    is_start: np.ndarray  # (N,) the current observation begins a BAMDP episode
-    episode_return: np.ndarray  # (N,) extrinsic return of the unfinished BAMDP episode
-
-
-@dataclasses.dataclass
-class TrainState:
-    """Everything a training run needs to continue exactly; `state_dict()` is its checkpoint."""
-
-    task: str
-    seed: int
-    frames: int  # the run's whole budget (iterations × envs × rollout length); the LR schedule depends on it
-    policy: Policy
-    optimizer: torch.optim.Optimizer
-    env: Any  # the suite.BatchEnv being trained on
-    carry: Carry
-    ext_scaler: ReturnScaler
-    bonus_scalers: list[ReturnScaler]
-    trajectories: TrajectoryBuffer
-    # The unfinished BAMDP episode's pieces (copies), completed into `trajectories` by a later rollout.
-    episode_chunks: list[dict[str, np.ndarray]] = dataclasses.field(default_factory=list)
-    history: list[dict] = dataclasses.field(default_factory=list)
-    iteration: int = 0
-
-    def identity(self) -> tuple:
-        """What a checkpoint must match to resume this run."""
-        return (config_lib.to_dict(self.policy.config), self.task, self.seed, self.frames)
-
-    def state_dict(self) -> dict:
-        carry = self.carry
-        return {
-            "config": config_lib.to_dict(self.policy.config),
-            "task": self.task,
-            "seed": self.seed,
-            "frames": self.frames,
-            "iteration": self.iteration,
-            "modules": self.policy.modules_state(),
-            "optimizer": self.optimizer.state_dict(),
-            "env": self.env.state_dict(),
-            "carry": {
-                "obs": carry.obs,
-                "belief": carry.belief,
-                "is_start": carry.is_start,
-                "episode_return": carry.episode_return,
-            },
-            "episode_chunks": list(self.episode_chunks),
-            "history": self.history,
-            "ext_scaler": self.ext_scaler.state_dict(),
-            "bonus_scalers": [s.state_dict() for s in self.bonus_scalers],
-            "buffer": self.trajectories.items,
-            "generator": self.policy.generator.get_state(),
-            "torch_rng": torch.get_rng_state(),
-        }
-
-    def load_state_dict(self, saved: dict) -> None:
-        self.policy.load_modules_state(saved["modules"])
-        self.optimizer.load_state_dict(saved["optimizer"])
-        self.env.load_state_dict(saved["env"])
-        self.ext_scaler.load_state_dict(saved["ext_scaler"])
-        for scaler, state in zip(self.bonus_scalers, saved["bonus_scalers"], strict=True):
-            scaler.load_state_dict(state)
-        self.trajectories.items = list(saved["buffer"])
-        self.episode_chunks = list(saved["episode_chunks"])
-        self.policy.generator.set_state(saved["generator"])
-        torch.set_rng_state(saved["torch_rng"])
-        self.carry = Carry(**saved["carry"])
-        self.history = saved["history"]
-        self.iteration = saved["iteration"]
+from hyperstate.agents.train_state import Carry, PhaseClock, TrainState, TrajectoryBuffer  # noqa: F401
 
 
 class Trainer:

@@ -20,3 +20,7 @@ class OneLineParser(argparse.ArgumentParser):
 
     def error(self, message: str) -> NoReturn:
         self.exit(2, f"{self.prog}: error: {message} (--help for usage)\n")
+
+
+class UsageError(Exception):
+    """A bad command line: reported in one line, exit code 2, nothing written."""
