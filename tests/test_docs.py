@@ -213,3 +213,43 @@ def test_readme_quickstart_runs_as_written(tmp_path):
     assert main([*deploy[1:], "--eval-tasks", "2"]) == 0
     record = json.loads(next((out / "cells").glob("*/record.json")).read_text())
     assert record["agent"] == "hyperx" and record["curve"] == [] and record["recorded_online_return"] > 800
+
+
+def test_architecture_page_shows_the_drawn_diagram_of_modules_that_exist_and_the_layers_hold(tmp_path):
+    """docs/architecture.md: scripts/architecture_diagram.py draws its diagram, every module the
+    diagram or the page names exists, and the packages import one way (suite ← agents ← evaluation)."""
+    import ast
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("architecture_diagram", ROOT / "scripts" / "architecture_diagram.py")
+    diagram = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(diagram)
+    drawn = diagram.draw(tmp_path / "architecture.png")
+    assert drawn.stat().st_size > 20_000
+    page = (ROOT / "docs" / "architecture.md").read_text()
+    assert "](figures/architecture.png)" in page and (ROOT / "docs" / "figures" / "architecture.png").exists()
+    named = set(diagram.modules_named()) | set(
+        re.findall(r"`((?:suite|agents|evaluation|hyperstate|scripts|tests)/[\w/]*\.?\w*)`", page)
+    )
+    assert len(named) >= 12
+    missing = [n for n in named if not (ROOT / n).exists()]
+    assert not missing, missing
+    assert "architecture.md" in (ROOT / "mkdocs.yml").read_text()
+
+    forbidden = {
+        "suite": ("agents", "evaluation"),
+        "agents": ("evaluation",),
+        "hyperstate": ("suite", "agents", "evaluation"),
+    }
+    for package, above in forbidden.items():
+        for path in (ROOT / package).rglob("*.py"):
+            for node in ast.walk(ast.parse(path.read_text())):
+                names = []
+                if isinstance(node, ast.Import):
+                    names = [a.name for a in node.names]
+                elif isinstance(node, ast.ImportFrom) and node.module:
+                    names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+                for name in names:
+                    parts = name.split(".")
+                    layer = parts[1] if parts[0] == "hyperstate" and len(parts) > 1 else None
+                    assert layer not in above, f"{path.relative_to(ROOT)} imports {name}"
