@@ -13,7 +13,11 @@ A merged grid is one experiment, so the parts must agree: every cell has the sam
 points and held-out tasks, and all seeds of one agent were trained with one configuration. A part that breaks
 this is refused with the differences named, and nothing is written. Unfinished cells are listed and left
 out. `OUT/sources.json` says where each cell came from: the part's folder, its grid arguments and the
-git commit of the code that trained it.
+git commit of the code that trained it. A part that is itself a merged grid (a committed results folder)
+passes on its own sources.json entries, with `via` naming it. `--agents` takes only some agents' cells, e.g.
+to pool the seeds of two agents from two committed grids:
+
+    python evaluation/merge.py --into docs/results/seeds --agents hyperx oracle_rh docs/results/grid runs/more
 """
 
 from __future__ import annotations
@@ -65,7 +69,13 @@ def config_differences(a: dict, b: dict) -> list[str]:
 
 
 def _describe_cell(record: dict, source: Path) -> dict:
-    """What a merged cell must share with the rest of its grid, and where it came from."""
+    """What a merged cell must share with the rest of its grid, and where it came from (a merged part's own
+    entry for the cell, with `via` naming the part)."""
+    merged_sources = source / SOURCES
+    if merged_sources.exists():
+        entry = json.loads(merged_sources.read_text()).get(grid.record_cell_id(record))
+        if entry is not None:
+            return {**entry, "via": str(source)}
     grid_file = source / grid.GRID
     arguments = json.loads(grid_file.read_text()) if grid_file.exists() else {}
     return {
@@ -79,19 +89,25 @@ def _describe_cell(record: dict, source: Path) -> dict:
     }
 
 
-def plan(into: Path, parts: list[Path], replace: bool = False) -> tuple[dict[str, Path], dict[str, dict], list[str]]:
-    """The cells to copy ({cell: part folder}), `into`'s sources.json as it will be after the copy, and the
-    notes to print (cells left out); MergeError if the parts and the cells already in `into` do not make one
-    grid."""
+def plan(
+    into: Path, parts: list[Path], replace: bool = False, agents: tuple[str, ...] | None = None
+) -> tuple[dict[str, Path], dict[str, dict], list[str]]:
+    """The cells to copy ({cell: part folder}; only `agents`' where given), `into`'s sources.json as it will
+    be after the copy, and the notes to print (cells left out); MergeError if the parts and the cells
+    already in `into` do not make one grid."""
     sources_path = into / SOURCES
     known: dict[str, dict] = json.loads(sources_path.read_text()) if sources_path.exists() else {}
     records = {grid.record_cell_id(r): r for r in load_records(into)}
     copies: dict[str, Path] = {}
     notes: list[str] = []
+    found = set()
     for part in parts:
         if not (part / grid.CELLS).is_dir():
             raise MergeError(f"{part} holds no grid (no {grid.CELLS}/ folder)")
         for record in load_records(part):
+            if agents is not None and record["agent"] not in agents:
+                continue
+            found.add(record["agent"])
             cell = grid.record_cell_id(record)
             if not record.get("complete") or record.get("final") is None:
                 last = record["curve"][-1]["frames"] if record.get("curve") else 0
@@ -106,6 +122,9 @@ def plan(into: Path, parts: list[Path], replace: bool = False) -> tuple[dict[str
             copies[cell] = part
             records[cell] = record
             known[cell] = _describe_cell(record, part)
+    missing = sorted(set(agents or ()) - found)
+    if missing:
+        raise MergeError(f"no cell of {', '.join(missing)} in {', '.join(map(str, parts))}")
     problems = grid_problems(known, records)
     if problems:
         raise MergeError("the parts do not make one grid:\n  " + "\n  ".join(problems))
@@ -137,11 +156,15 @@ def grid_problems(known: dict[str, dict], records: dict[str, dict]) -> list[str]
 
 
 def merge(
-    into: Path, parts: list[Path], with_agent: bool = False, replace: bool = False
+    into: Path,
+    parts: list[Path],
+    with_agent: bool = False,
+    replace: bool = False,
+    agents: tuple[str, ...] | None = None,
 ) -> tuple[list[str], list[dict]]:
-    """Copies the finished cells of `parts` into `into` and rewrites its report; returns the notes and the
-    summary rows."""
-    copies, sources, notes = plan(into, parts, replace)
+    """Copies the finished cells of `parts` (only `agents`' where given) into `into` and rewrites its report;
+    returns the notes and the summary rows."""
+    copies, sources, notes = plan(into, parts, replace, agents)
     files = CELL_FILES + ((grid.AGENT,) if with_agent else ())
     for cell, part in sorted(copies.items()):
         target = grid.cell_dir(into, cell)
@@ -172,9 +195,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--into", type=Path, required=True, help="the merged grid (created, or added to)")
     p.add_argument("--with-agent", action="store_true", help="also keep each cell's final agent.pt")
     p.add_argument("--replace", action="store_true", help="a part's cell replaces the same cell already merged")
+    p.add_argument("--agents", nargs="+", metavar="AGENT", help="take only these agents' cells from the parts")
     args = p.parse_args(argv)
+    agents = tuple(args.agents) if args.agents else None
     try:
-        notes, rows = merge(args.into, args.parts, args.with_agent, args.replace)
+        notes, rows = merge(args.into, args.parts, args.with_agent, args.replace, agents)
     except MergeError as e:
         print(f"{cli.program_name('evaluation/merge.py')}: error: {e}", file=sys.stderr)
         return 2

@@ -780,3 +780,35 @@ def test_merge_gathers_grids_run_in_parts_and_refuses_parts_of_other_experiments
     assert merge_main([str(parts["b"]), "--into", str(into), "--replace"]) == 0
     merged = {r["seed"]: r for r in json.loads((into / "results.json").read_text())}
     assert merged[1]["final"]["online_return"] == changed["final"]["online_return"]
+
+
+def test_merge_takes_some_agents_from_committed_grids_and_keeps_where_each_cell_came_from(tmp_path, tiny_config):
+    """`--agents` pools some agents' seeds out of merged (committed) grids; a cell merged twice keeps its
+    first source, git commit and grid arguments, with `via` naming the merged grid it passed through."""
+    from hyperstate.evaluation.merge import main as merge_main
+
+    common = "--tasks cheetah_dir_sparse --frames 400 --eval-every 200 --eval-tasks 4 --no-reference "
+    common += f"--workers 1 --no-progress --config {tiny_config}"
+    two, one = tmp_path / "two_agents", tmp_path / "more_seeds"
+    for out, spec in ((two, "--agents oracle ppo --seeds 0"), (one, "--agents oracle --seeds 1")):
+        proc = run(f"{spec} {common} --out {out}".split())
+        assert proc.returncode == 0, proc.stderr[-2000:]
+    committed = tmp_path / "committed"
+    assert merge_main([str(two), "--into", str(committed)]) == 0
+    pooled = tmp_path / "pooled"
+    assert merge_main([str(committed), str(one), "--agents", "oracle", "--into", str(pooled)]) == 0
+    assert sorted(p.name for p in (pooled / "cells").iterdir()) == [
+        "oracle__cheetah_dir_sparse__s0",
+        "oracle__cheetah_dir_sparse__s1",
+    ]
+    sources = json.loads((pooled / "sources.json").read_text())
+    first = json.loads((committed / "sources.json").read_text())["oracle__cheetah_dir_sparse__s0"]
+    assert sources["oracle__cheetah_dir_sparse__s0"] == {**first, "via": str(committed)}
+    assert first["source"] == str(two) and first["budget"] == 400
+    assert "via" not in sources["oracle__cheetah_dir_sparse__s1"]
+    with (pooled / "summary.csv").open() as f:
+        (row,) = list(csv.DictReader(f))
+    assert (row["agent"], row["seeds"]) == ("oracle", "2")
+    # An agent none of the parts has: refused, nothing written.
+    assert merge_main([str(committed), "--agents", "hyperx", "--into", str(tmp_path / "none")]) == 2
+    assert not (tmp_path / "none").exists()
