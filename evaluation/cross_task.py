@@ -18,7 +18,9 @@ on any of them (a bootstrap over tasks needs as many runs per task). Agents miss
 out of the aggregate, with a message.
 Writes OUT/cross_task.csv (one row per statistic: `normaliser` per task with its `low` and `high`
 returns, `iqm` per agent and `probability_of_improvement` per pair with `value`, `ci_low`, `ci_high` and
-the `runs` behind them; the profiles are in the figure) and OUT/cross_task.png.
+the `runs` behind them; the profiles are in the figure) and OUT/cross_task.png. `--table FILE` also
+writes the README's table: tasks × agents, each agent's mean online return and, where the task declares a
+success criterion, how many seeds meet it.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ import numpy as np
 
 from hyperstate.evaluation import cli
 from hyperstate.evaluation.cell import load_records
+from hyperstate.files import write_text_atomic
 
 CSV_NAME, FIGURE_NAME = "cross_task.csv", "cross_task.png"
 FIELDS = ("statistic", "agent", "task", "value", "ci_low", "ci_high", "runs", "low", "high")
@@ -44,14 +47,13 @@ class ReportError(ValueError):
     """Grids that cannot make a cross-task report; one line for the user."""
 
 
-def returns_by_task(grids: list[Path], say=print) -> dict[str, dict[str, dict[int, float]]]:
-    """{task: {agent: {seed: online return at deployment}}} from the finished cells of `grids`. An agent
-    is one configuration: its cells on a task come from the grids whose configuration for it equals the
-    first one found (runtime settings aside); a cell (agent, task, seed) in several grids is taken from the
-    first."""
+def finished_cells(grids: list[Path], say=print) -> dict[str, dict[str, dict[int, dict]]]:
+    """{task: {agent: {seed: final deployment metrics}}} from the finished cells of `grids`. An agent is one
+    configuration: its cells on a task come from the grids whose configuration for it equals the first one
+    found (runtime settings aside); a cell (agent, task, seed) in several grids is taken from the first."""
     from hyperstate.evaluation.merge import comparable
 
-    table: dict[str, dict[str, dict[int, float]]] = defaultdict(lambda: defaultdict(dict))
+    table: dict[str, dict[str, dict[int, dict]]] = defaultdict(lambda: defaultdict(dict))
     configs: dict[tuple[str, str], dict] = {}
     left_out = defaultdict(set)
     for folder in grids:
@@ -67,10 +69,51 @@ def returns_by_task(grids: list[Path], say=print) -> dict[str, dict[str, dict[in
             if r["seed"] in seeds:
                 left_out[folder].add(f"{r['agent']} s{r['seed']} (already taken from an earlier grid)")
                 continue
-            seeds[r["seed"]] = float(r["final"]["online_return"])
+            seeds[r["seed"]] = r["final"]
     for folder, cells in left_out.items():
         say(f"cross-task report: {folder}: left out {', '.join(sorted(cells))}")
     return table
+
+
+def returns_by_task(grids: list[Path], say=print) -> dict[str, dict[str, dict[int, float]]]:
+    """{task: {agent: {seed: online return at deployment}}}, the cells chosen as `finished_cells` does."""
+    return {
+        task: {agent: {s: float(f["online_return"]) for s, f in seeds.items()} for agent, seeds in agents.items()}
+        for task, agents in finished_cells(grids, say).items()
+    }
+
+
+def results_table(grids: list[Path], agents: list[str] | None = None, link: str | None = None, say=print) -> str:
+    """A Markdown table, tasks × agents: each agent's mean online return at deployment over its seeds and,
+    for tasks that declare a success criterion (`suite.register(..., success=)`), the seeds that meet it
+    (`solved k/n`). `link` (e.g. "docs/results/{task}.md") makes each task name a link."""
+    from hyperstate import suite
+    from hyperstate.agents import GRID_PRESETS
+
+    cells = finished_cells(grids, say)
+    present = {a for per_task in cells.values() for a in per_task}
+    order = [a for a in (agents or [*GRID_PRESETS, *sorted(present - set(GRID_PRESETS))]) if a in present]
+    lines = [
+        "| task | " + " | ".join(f"`{a}`" for a in order) + " |",
+        "|---|" + "---|" * len(order),
+    ]
+    for task in sorted(cells):
+        try:
+            success = suite.success(task)
+        except ValueError:  # a task not registered in this process: returns only
+            success = None
+        entries = []
+        for agent in order:
+            finals = list(cells[task].get(agent, {}).values())
+            if not finals:
+                entries.append("—")
+                continue
+            mean = float(np.mean([f["online_return"] for f in finals]))
+            solved = f" (solved {sum(bool(success(f)) for f in finals)}/{len(finals)})" if success else ""
+            entries.append(f"{mean:,.0f}{solved}")
+        name = f"[`{task}`]({link.format(task=task)})" if link else f"`{task}`"
+        lines.append(f"| {name} | " + " | ".join(entries) + " |")
+    return "\n".join(lines) + "\n"
 
 
 def normalisers(table, low_agent: str, high_agent: str, say=print) -> dict[str, tuple[float, float]]:
@@ -250,6 +293,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--pairs", nargs="+", type=_pair, default=None, help="X:Y, P(X > Y) (default: %(default)s)")
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap replications")
     parser.add_argument("--seed", type=int, default=0, help="the bootstrap's seed")
+    parser.add_argument("--table", type=Path, default=None, help="also write the tasks × agents Markdown table here")
+    parser.add_argument("--table-link", default=None, help="each task's link in the table, e.g. docs/{task}.md")
     args = parser.parse_args(argv)
     grids = [g for g in args.grids if (g / "cells").is_dir()]
     others = [str(g) for g in args.grids if g.is_dir() and g not in grids]  # plain files are passed over
@@ -263,6 +308,10 @@ def main(argv: list[str] | None = None) -> int:
                       say=lambda m: print(f"{prog}: {m.split(': ', 1)[1]}", file=sys.stderr))  # fmt: skip
     except ReportError as e:
         parser.exit(1, f"{prog}: {e}\n")
+    if args.table is not None:
+        args.table.parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(args.table, results_table(grids, args.agents, args.table_link, say=lambda m: None))
+        print(args.table)
     for r in rows:
         if r["statistic"] != "normaliser":
             print(f"{r['statistic']:28s} {r['agent']:24s} {r['value']:7.3f}  [{r['ci_low']:.3f}, {r['ci_high']:.3f}]")

@@ -119,3 +119,35 @@ def test_the_command_names_bad_input_in_one_line(tmp_path):
     proc = run(both, "--reps", 50, "--out", tmp_path / "o")
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.strip().endswith(str(tmp_path / "o" / "cross_task.png"))
+
+
+def test_the_results_table_gives_each_agents_mean_and_the_seeds_that_meet_the_tasks_criterion(tmp_path):
+    """`--table`: tasks × agents, mean online return over seeds and, for a task with a success criterion
+    (cheetah_dir_sparse: the turn pays), the seeds that meet it; an agent a task lacks is a dash."""
+    grid = write_grid(tmp_path / "g", RETURNS)
+    turn = tmp_path / "cheetah"
+    finals = [  # pays; one way (correct 0.5); pays without wrong-first deployments
+        {"online_return": 900.0, "correct_direction": 1.0, "return_wrong_first": 300.0},
+        {"online_return": 430.0, "correct_direction": 0.5, "return_wrong_first": -20.0},
+        {"online_return": 800.0, "correct_direction": 0.95},
+    ]
+    for seed, final in enumerate(finals):
+        cell = turn / "cells" / f"oracle_rh__cheetah_dir_sparse__s{seed}"
+        cell.mkdir(parents=True)
+        record = {"agent": "oracle_rh", "task": "cheetah_dir_sparse", "seed": seed, "complete": True,
+                  "config": {"agent": "oracle_rh"}, "final": final}  # fmt: skip
+        (cell / "record.json").write_text(json.dumps(record))
+    out = tmp_path / "table.md"
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "evaluation" / "cross_task.py"), grid, turn, "--reps", "50", "--out",
+         tmp_path / "o", "--table", out, "--table-link", "results/{task}.md"],
+        capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    lines = out.read_text().splitlines()
+    header = [c.strip() for c in lines[0].strip("|").split("|")]
+    assert header == ["task", "`oracle`", "`oracle_rh`", "`varibad`", "`hyperx`", "`task_aware`"]
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.strip("|").split("|")[1:]] for line in lines[2:]}
+    assert rows["[`cheetah_dir_sparse`](results/cheetah_dir_sparse.md)"] == ["—", "710 (solved 2/3)", "—", "—", "—"]
+    expected = [f"{np.mean(RETURNS['task_a'][a]):,.0f}" for a in ("oracle", "oracle_rh", "varibad", "hyperx")]
+    assert rows["[`task_a`](results/task_a.md)"] == [*expected, "100"]
