@@ -17,7 +17,7 @@ git commit of the code that trained it. A part that is itself a merged grid (a c
 passes on its own sources.json entries, with `via` naming it. `--agents` takes only some agents' cells, e.g.
 to pool the seeds of two agents from two committed grids:
 
-    python evaluation/merge.py --into docs/results/seeds --agents hyperx oracle_rh docs/results/grid runs/more
+    python evaluation/merge.py --into docs/results/seeds docs/results/grid runs/more --agents hyperx oracle_rh
 """
 
 from __future__ import annotations
