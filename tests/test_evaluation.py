@@ -812,3 +812,42 @@ def test_merge_takes_some_agents_from_committed_grids_and_keeps_where_each_cell_
     # An agent none of the parts has: refused, nothing written.
     assert merge_main([str(committed), "--agents", "hyperx", "--into", str(tmp_path / "none")]) == 2
     assert not (tmp_path / "none").exists()
+
+
+@pytest.mark.parametrize(
+    "task,oracles", [("rooms_sparse", True), ("point_robot_sparse", False), ("mountain_treasure_k8_sparse", True)]
+)
+def test_the_catalogue_script_runs_the_issues_agents_and_the_oracles_where_the_task_has_an_exact_belief(task, oracles):
+    """scripts/reproduce_catalogue.sh: the meta-learners and the task-aware reference on every task, the
+    belief oracles where the task has a privileged `belief`; 3 seeds, 20 held-out tasks, 10 points; a
+    harness call that parses and builds with the presets as they are."""
+    from hyperstate.evaluation.run import build_grid, parse_args
+
+    env = {k: v for k, v in os.environ.items() if k not in ("AGENTS", "SEEDS", "CONFIG", "EVAL_EVERY")}
+    proc = subprocess.run(["bash", str(ROOT / "scripts" / "reproduce_catalogue.sh"), task, "2e7"],
+                          capture_output=True, text=True, env={**env, "DRY_RUN": "1"}, timeout=300)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    command = proc.stdout.split()
+    args = command[command.index("evaluation/run.py") + 1 :]
+    expected = ["hyperx", "varibad_rh", "varibad", "rl2", "task_supervised", "task_aware"]
+    expected += ["oracle", "oracle_rh", "oracle_rs"] if oracles else []
+    assert args[args.index("--agents") + 1 : args.index("--tasks")] == expected
+    assert args[args.index("--seeds") + 1 : args.index("--frames")] == ["0", "1", "2"]
+    assert args[args.index("--eval-every") + 1] == "2000000" and args[args.index("--eval-tasks") + 1] == "20"
+    built, overrides = build_grid(parse_args(args))
+    assert built == expected and all(o == {} for o in overrides.values())
+
+
+def test_the_catalogue_script_trains_and_deploys_both_ways(tmp_path, tiny_config):
+    """A tiny run of scripts/reproduce_catalogue.sh: each record holds the deterministic and the sampled
+    deployment on the held-out tasks (--eval-tasks 20: all 48 of Rooms' finite prior, each once)."""
+    out = tmp_path / "rooms"
+    env = {**os.environ, "AGENTS": "oracle", "SEEDS": "0", "CONFIG": str(tiny_config), "EVAL_EVERY": "200"}
+    proc = subprocess.run(["bash", str(ROOT / "scripts" / "reproduce_catalogue.sh"), "rooms_sparse", "400", out],
+                          capture_output=True, text=True, env=env, timeout=600)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    record = json.loads((out / "cells" / "oracle__rooms_sparse__s0" / "record.json").read_text())
+    assert record["complete"] and [p["frames"] for p in record["curve"]] == [200, 400]
+    assert len(record["final"]["online_return_per_task"]) == 48
+    assert "online_return" in record["final"]["stochastic"]
+    assert "goals_reached" in record["final"]
