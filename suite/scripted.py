@@ -8,6 +8,11 @@
   meta-learner that does not explore does).
 - Rooms: `RoomsExplorer` visits the candidate corners of each stage in a fixed order until the stage
   pays, then the next stage's, then stays on goal 3.
+- Point robot: `PointExplorer` visits the candidate goals from one end of the half circle to the other
+  until one pays and returns to it in every later MDP episode (the Bayes-optimal strategy's shape on a
+  finite prior); `ArcSweeper` does the same along the whole half circle (a continuous prior);
+  `PointGoalSeeker` reads the true goal (privileged observations) and goes straight to it: the
+  task-aware bound.
 
 A strategy is called with each step's observation and reward (`act(observation, reward)`) and
 `reset()` at every BAMDP episode start; `rollout(env, strategy)` runs one BAMDP episode.
@@ -17,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from hyperstate.suite import mountain_treasure, rooms
+from hyperstate.suite import mountain_treasure, point_robot, rooms
 from hyperstate.suite.cheetah_dir import BACKWARD, CONTROL_TIMESTEP, FORWARD
 
 
@@ -160,3 +165,66 @@ class RoomsExplorer:
                 return np.zeros(2)
             self.route = self._route_to(position, target)
         return np.clip(self.GAIN * (self.route[0] - position) - self.DAMPING * velocity, -1.0, 1.0)
+
+
+def _damped(observation: dict, target: np.ndarray, gain: float = 8.0, damping: float = 0.8) -> np.ndarray:
+    """The point mass's action toward `target`: a proportional controller with velocity damping (the
+    closed loop is about critically damped for the 0.2 s velocity lag of the point robot and Rooms)."""
+    return np.clip(gain * (target - observation["position"]) - damping * observation["velocity"], -1.0, 1.0)
+
+
+class PointExplorer:
+    """Point robot, finite prior: visits the candidate goals in order (angle 0 to π), each until the
+    robot is within `reach` of it, until a step pays; from then on it goes to the paying candidate, in
+    this and every later MDP episode. `candidates` (K, 2), e.g.
+    `point_robot.HalfCircleGoalPrior(num_goals=K).support()`."""
+
+    snap_to_candidate = True  # a paying step reveals the goal: the candidate nearest to it
+
+    def __init__(self, candidates: np.ndarray, reach: float = 0.1):
+        self.candidates = np.asarray(candidates, dtype=np.float64)
+        self.reach = float(reach)
+
+    def reset(self) -> None:
+        self.found: np.ndarray | None = None
+        self.next = 0
+        self.episode = 0.0
+
+    def act(self, observation: dict, reward: float) -> np.ndarray:
+        position, episode = observation["position"], float(observation["inner_episode"][0])
+        if reward > 0 and self.found is None:
+            # A step that ends an MDP episode shows the next one's start, not where it paid: then the
+            # step paid on the way to the candidate it was heading for.
+            paid_at = self.candidates[self.next] if episode != self.episode else position
+            nearest = self.candidates[np.argmin(np.linalg.norm(self.candidates - paid_at, axis=1))]
+            self.found = (nearest if self.snap_to_candidate else paid_at).copy()
+        self.episode = episode
+        if self.found is not None:
+            return _damped(observation, self.found)
+        while (
+            self.next < len(self.candidates) - 1 and np.linalg.norm(position - self.candidates[self.next]) < self.reach
+        ):
+            self.next += 1
+        return _damped(observation, self.candidates[self.next])
+
+
+class ArcSweeper(PointExplorer):
+    """Point robot, continuous prior: out to the half circle's end at angle 0, then along it to angle π
+    (waypoints `spacing` radians apart) until a step pays; from then on it goes to where the step paid."""
+
+    snap_to_candidate = False
+
+    def __init__(self, spacing: float = 0.1, reach: float = 0.1):
+        angles = np.arange(0.0, np.pi + 1e-9, spacing)
+        super().__init__(point_robot.GOAL_DISTANCE * np.stack([np.cos(angles), np.sin(angles)], 1), reach)
+
+
+class PointGoalSeeker:
+    """Point robot: straight to the true goal in every MDP episode (needs `privileged=True`: it reads the
+    `task` observation), and stays there. Not a meta-learner: the task-aware bound of the bracket."""
+
+    def reset(self) -> None:
+        pass
+
+    def act(self, observation: dict, reward: float) -> np.ndarray:
+        return _damped(observation, np.asarray(observation["task"], dtype=np.float64))

@@ -384,3 +384,37 @@ def test_scripted_bracket_ranks_the_mountain_strategies(tmp_path):
     climber, walker = result["MountainClimber"], result["CircleWalker"]
     assert climber["treasures"] == walker["treasures"] == 8
     assert climber["min"] <= climber["mean"] <= climber["max"] and climber["mean"] > walker["mean"]
+
+
+def test_scripted_bracket_ranks_the_point_strategies():
+    """The point tasks' bracket: the candidate explorer beats one kept guess and is bounded by the goal
+    seeker; after the episode that found the goal, it earns what the seeker earns (it goes straight back)."""
+    import importlib.util
+
+    from hyperstate import suite
+    from hyperstate.suite import point_robot, scripted
+
+    spec = importlib.util.spec_from_file_location("scripted_bracket", ROOT / "scripts" / "scripted_bracket.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    result = module.point_tasks(angles=8)
+    treasure, robot = result["point_treasure_sparse"], result["point_robot_sparse"]
+    assert treasure["PointGoalSeeker"]["mean"] > treasure["PointExplorer"]["mean"] > treasure["one_guess"]["mean"] > 0
+    assert treasure["one_guess"]["min"] == 0  # a kept guess earns nothing on the other three goals
+    assert robot["PointGoalSeeker"]["mean"] > robot["ArcSweeper"]["mean"] > 0 and robot["ArcSweeper"]["min"] > 0
+    candidates = point_robot.HalfCircleGoalPrior(num_goals=4).support()
+    for goal in candidates:
+        runs = {}
+        for name, strategy in (
+            ("explorer", scripted.PointExplorer(candidates)),
+            ("seeker", scripted.PointGoalSeeker()),
+        ):
+            env = suite.load("point_treasure_sparse", seed=0, goal=goal, privileged=True)
+            rewards, obs = scripted.rollout(env, strategy)
+            # Recomputed from where the steps ended (the episode's last step shows the next start: left out).
+            paid = np.linalg.norm(obs["position"] - goal, axis=1) <= point_robot.GOAL_RADIUS
+            inner = obs["inner_episode"][:, 0]
+            same = np.r_[True, inner[1:] == inner[:-1]]
+            np.testing.assert_array_equal(rewards[same], paid[same].astype(float))
+            runs[name] = rewards[len(rewards) // 2 :].sum()
+        assert runs["explorer"] == runs["seeker"] > 30

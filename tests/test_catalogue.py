@@ -261,6 +261,25 @@ def test_goal_metrics_on_known_trajectories():
     np.testing.assert_array_equal(m["last_episode_at_goal"], [1.0, 0.0])
 
 
+def test_point_tasks_success_needs_finding_and_returning_to_the_goal():
+    """The scripted candidate explorer succeeds on point_treasure_sparse; one kept guess finds the goal in a
+    quarter of the tasks and fails; finding without returning fails too."""
+    from hyperstate.suite import scripted
+
+    success = suite.success("point_treasure_sparse")
+    assert success is suite.success("point_robot_sparse") and suite.success("point_robot") is None
+    support = suite.task_prior("point_treasure_sparse").support()
+    for strategy, expected in ((scripted.PointExplorer(support), True), (scripted.PointExplorer(support[:1]), False)):
+        per_task = []
+        for goal in support:
+            env = suite.load("point_treasure_sparse", seed=0, goal=goal)
+            _, obs = scripted.rollout(env, strategy)
+            per_task.append(goal_metrics({k: v[:, None] for k, v in obs.items()}, np.zeros((100, 1)), goal[None]))
+        final = {k: float(np.mean([m[k] for m in per_task])) for k in ("goal_reached", "last_episode_at_goal")}
+        assert success(final) is expected, final
+    assert not success({"goal_reached": 1.0, "last_episode_at_goal": 0.4})
+
+
 # Cheetah velocity --------------------------------------------------------------------------------
 def test_cheetah_velocity_reward_recomputed_from_physics():
     target = 2.0
