@@ -73,7 +73,9 @@ class PPOConfig:
     sampled_action_cost: float = 0.05
     """Adds coef · (|a|² - |clip(a)|²) of the sampled action a to the training reward: the task charges its
     control cost on the clipped action, the reference's environments on the sampled one (0.05 is the cheetah's
-    control-cost weight); deployment is unaffected."""
+    control-cost weight). Charged on every task, control cost or not, so that a preset is one agent across
+    the catalogue: it only touches the part of a sample beyond the action bounds, which no task rewards;
+    deployment is unaffected."""
     intrinsic_gamma: float | None = None
     """None: the weighted bonuses join the extrinsic reward and one critic learns the sum. A discount: a second
     critic head learns the intrinsic return alone, discounted by it (RND's two value heads)."""
