@@ -315,9 +315,18 @@ def _top_down_plot(data, record: dict, view: suite.TopDownView, path: Path, plt)
     for ax, i in zip(axes.ravel(), firsts, strict=True):
         if view.draw_scene is not None:
             view.draw_scene(ax, tasks[i])
-        ax.plot(xy[:, i, 0], xy[:, i, 1], "-", color="tab:blue", linewidth=1.5, alpha=0.8)
-        ax.plot(*xy[0, i], "o", color="tab:blue")
-        ax.plot(*xy[-1, i], "x", color="tab:blue", markersize=8)
+        # One colour per MDP episode (the robot is reset between them); the start a circle, the end a cross.
+        # The observed episode index: a step ending an episode shows the next one's start.
+        episode = data["obs_inner_episode"][:, i, 0] if "obs_inner_episode" in data else np.zeros(len(xy))
+        for k, value in enumerate(np.unique(episode)):
+            steps = np.flatnonzero(episode == value)
+            color = f"C{k}"
+            label = f"episode {k + 1}" if len(np.unique(episode)) > 1 and i == firsts[0] else None
+            ax.plot(xy[steps, i, 0], xy[steps, i, 1], "-", color=color, linewidth=1.5, alpha=0.8, label=label)
+            ax.plot(*xy[steps[0], i], "o", color=color)
+            ax.plot(*xy[steps[-1], i], "x", color=color, markersize=8)
+        if i == firsts[0] and len(np.unique(episode)) > 1:
+            ax.legend(fontsize=6, loc="lower left")
         ax.set_xlim(x_min, x_max)
         ax.set_ylim(y_min, y_max)
         ax.set_aspect("equal")

@@ -20,6 +20,7 @@ candidates in episode 1 pays off in episode 2 (the task stays, the robot is rese
 from __future__ import annotations
 
 import collections
+import functools
 
 import mujoco
 import numpy as np
@@ -28,7 +29,7 @@ from dm_control.rl import control
 from dm_control.suite import base as suite_base
 
 from hyperstate.suite._mujoco_batch import MujocoBatch
-from hyperstate.suite._registry import register
+from hyperstate.suite._registry import TopDownView, register
 from hyperstate.suite._seeding import SeedLike, spawn_seeds
 from hyperstate.suite.base import Marker, MetaTask, check_action
 
@@ -256,6 +257,23 @@ def goal_metrics(
     }
 
 
+def draw_scene(ax, task: np.ndarray, num_goals: int | None = None) -> None:
+    """The arena's walls, the half circle of goals, the candidates of a finite prior, and the task's goal
+    with its reward disc."""
+    from matplotlib.patches import Circle, Rectangle
+
+    ax.add_patch(Rectangle((-ARENA, -ARENA), 2 * ARENA, 2 * ARENA, fill=False, color="0.35", linewidth=1))
+    arc = np.linspace(0.0, np.pi, 100)
+    ax.plot(GOAL_DISTANCE * np.cos(arc), GOAL_DISTANCE * np.sin(arc), color="0.7", linewidth=1)
+    support = HalfCircleGoalPrior(num_goals=num_goals).support()
+    for candidate in () if support is None else support:
+        ax.add_patch(Circle(candidate, GOAL_RADIUS, fill=False, color="0.6", linewidth=0.5))
+    ax.add_patch(Circle(np.asarray(task)[:2], GOAL_RADIUS, color="tab:green", alpha=0.4))
+
+
+EXTENT = (-ARENA, ARENA, -ARENA, ARENA)  # the whole arena: the robot can run to its walls
+
+
 def finds_and_returns(final: dict) -> bool:
     """Success: in at least 90 % of deployments the agent found the goal, and it spent at least half of
     the last MDP episode's steps at it on average (the scripted candidate explorer: 100 % and 0.8)."""
@@ -325,6 +343,7 @@ def _register(
         position_keys=("position",),
         reference_task=reference_task,
         success=finds_and_returns if sparse else None,
+        top_down=TopDownView("position", EXTENT, functools.partial(draw_scene, num_goals=num_goals)),
     )(factory)
 
 

@@ -402,3 +402,29 @@ def test_task_aware_ppo_learns_to_reach_the_dense_point_robot_goal():
     after = deploy(trained, "point_robot", goals).rewards.sum(0)
     assert before.mean() < -80
     assert after.mean() > -50 and np.all(after > before)
+
+
+def test_point_tasks_top_down_view_draws_candidates_goal_and_each_episode(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from hyperstate.evaluation import report
+    from hyperstate.suite import scripted
+
+    support = suite.task_prior("point_treasure_sparse").support()
+    for name, circles in (("point_treasure_sparse", 4 + 1), ("point_robot_sparse", 1)):
+        view = suite.top_down(name)
+        assert view.key == "position" and view.extent == (-1.5, 1.5, -1.5, 1.5)  # the arena's walls
+        fig, ax = plt.subplots()
+        view.draw_scene(ax, support[2])
+        discs = [p for p in ax.patches if isinstance(p, matplotlib.patches.Circle)]
+        assert len(discs) == circles and np.allclose(discs[-1].center, support[2])
+        plt.close(fig)
+    env = suite.load("point_treasure_sparse", seed=0, goal=support[3])
+    rewards, obs = scripted.rollout(env, scripted.PointExplorer(support))
+    data = {f"obs_{k}": v[:, None] for k, v in obs.items()} | {"tasks": support[3][None], "rewards": rewards[:, None]}
+    record = {"agent": "scripted", "task": "point_treasure_sparse", "seed": 0}
+    path = report._top_down_plot(data, record, suite.top_down("point_treasure_sparse"), tmp_path / "b.png", plt)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
