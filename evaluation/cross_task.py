@@ -92,7 +92,10 @@ def results_table(grids: list[Path], agents: list[str] | None = None, link: str 
 
     cells = finished_cells(grids, say)
     present = {a for per_task in cells.values() for a in per_task}
-    order = [a for a in (agents or [*GRID_PRESETS, *sorted(present - set(GRID_PRESETS))]) if a in present]
+    # The meta-learners first, the task-aware reference (not a meta-learner) last.
+    learners = [a for a in GRID_PRESETS if a != "task_aware"]
+    default = [*learners, *sorted(present - set(learners) - {"task_aware"}), "task_aware"]
+    order = [a for a in (agents or default) if a in present]
     lines = [
         "| task | " + " | ".join(f"`{a}`" for a in order) + " |",
         "|---|" + "---|" * len(order),
