@@ -113,7 +113,7 @@ def results_table(grids: list[Path], agents: list[str] | None = None, link: str 
                 continue
             mean = float(np.mean([f["online_return"] for f in finals]))
             solved = f" (solved {sum(bool(success(f)) for f in finals)}/{len(finals)})" if success else ""
-            entries.append(f"{mean:,.0f}{solved}")
+            entries.append(f"{round(mean) or 0:,}{solved}")  # `or 0`: no "-0" for a mean in (-0.5, 0)
         name = f"[`{task}`]({link.format(task=task)})" if link else f"`{task}`"
         lines.append(f"| {name} | " + " | ".join(entries) + " |")
     return "\n".join(lines) + "\n"
