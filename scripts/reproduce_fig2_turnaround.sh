@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The turn-around grid (docs/results/fig2_turnaround): the validated presets as they are, on cheetah_dir_sparse,
+# The turn-around grid (docs/results/fig2_turnaround): the validated presets as they are (rl2 and task_supervised
+# included), on cheetah_dir_sparse,
 # 3 seeds, 2e7 frames, 20 held-out tasks. The task-aware reference is one of the agents, so the grid can run in
 # parts (some agents or seeds per machine or session), merged with hyperstate-merge:
 #   bash scripts/reproduce_fig2_turnaround.sh [FRAMES] [OUT]                     # the whole grid
@@ -12,7 +13,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 FRAMES=${1:-20000000}
 OUT=${2:-runs/fig2_turnaround}
-read -r -a AGENT_LIST <<< "${AGENTS:-oracle_rh hyperx varibad_rh oracle_rs oracle varibad task_aware}"
+read -r -a AGENT_LIST <<< "${AGENTS:-oracle_rh hyperx varibad_rh oracle_rs oracle varibad rl2 task_supervised task_aware}"
 read -r -a SEED_LIST <<< "${SEEDS:-0 1 2}"
 EXTRA=()
 [ -f "$OUT/grid.json" ] && EXTRA+=(--resume)
