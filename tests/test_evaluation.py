@@ -560,6 +560,34 @@ def test_reproduce_scripts_run_the_presets_as_they_are_at_the_committed_grids_se
     assert built == names and all(o == {} for o in overrides.values())
 
 
+@pytest.mark.parametrize("path", sorted((ROOT / "research" / "catalogue").glob("*.toml")), ids=lambda p: p.stem)
+def test_catalogue_overlays_change_one_named_setting_the_same_on_every_calibration_agent(path):
+    """research/catalogue/*.toml (calibrate.sh's CONFIG): one [all] table, so every agent of a calibration gets
+    the same per-task setting, and each field it names reaches the built agent with that value."""
+    import tomllib
+
+    from hyperstate.evaluation.run import build_grid, parse_args
+
+    tables = tomllib.loads(path.read_text())
+    assert list(tables) == ["all"] and tables["all"]
+    names = ["hyperx", "oracle_rh", "oracle", "varibad_rh", "varibad"]
+    args = parse_args(["--agents", *names, "--tasks", "point_robot_sparse", "--frames", "2e7", "--out", "unused",
+                       "--no-reference", "--config", str(path)])  # fmt: skip
+    built, overrides = build_grid(args)
+    assert built == names and all(o == tables["all"] for o in overrides.values())
+
+    def field(config, key):
+        for part in key.split("."):
+            config = getattr(config, part)
+        return config
+
+    for name in names:
+        changed, plain = agents.make(name, **overrides[name]).config, agents.make(name).config
+        for key, value in tables["all"].items():
+            assert field(changed, key) == value != field(plain, key), (name, key)
+    assert '--config "$CONFIG"' in (ROOT / "research" / "catalogue" / "calibrate.sh").read_text()
+
+
 CAMPAIGN = ROOT / "research" / "turnaround"
 
 

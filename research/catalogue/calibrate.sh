@@ -3,11 +3,14 @@
 # what the best of them needs, with a learning curve dense enough to see where it flattens.
 #
 #   TASK=rooms_sparse AGENTS="hyperx oracle_rh oracle" bash research/catalogue/calibrate.sh [FRAMES] [OUT]
+#   CONFIG=research/catalogue/gamma_0.99.toml TASK=... bash research/catalogue/calibrate.sh [FRAMES] [OUT]
 #
 # FRAMES defaults to 2e7 (the HyperX reference's point-robot budget; the presets' learning rate decays
 # over 5e7 frames whatever the budget, so a longer run continues this one: --resume with a larger
 # --frames). Each agent gets its own --out folder (OUT_<agent>), so agents run and merge independently;
-# rerunning the command resumes. Plain evaluation/run.py with the presets as they are: no --config.
+# rerunning the command resumes. Plain evaluation/run.py with the presets as they are, unless CONFIG names
+# an overrides file (one per-task setting, the same for every agent: --config CONFIG). A run with CONFIG
+# needs its own OUT.
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 : "${TASK:?set TASK to a registered task}"
@@ -18,7 +21,8 @@ for agent in "${AGENT_LIST[@]}"; do
   out="${OUT}_${agent}"
   EXTRA=()
   [ -f "$out/grid.json" ] && EXTRA+=(--resume)
-  echo "=== $agent on $TASK: start $(date -u +%FT%TZ) commit $(git rev-parse --short HEAD)"
+  [ -n "${CONFIG:-}" ] && EXTRA+=(--config "$CONFIG")
+  echo "=== $agent on $TASK: start $(date -u +%FT%TZ) commit $(git rev-parse --short HEAD) config ${CONFIG:-none}"
   MUJOCO_GL=disable .venv/bin/python evaluation/run.py \
     --agents "$agent" --tasks "$TASK" --seeds "${SEED:-0}" \
     --frames "$FRAMES" --eval-every 1000000 --eval-tasks 20 --no-reference \
