@@ -198,6 +198,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--agents", nargs="+", metavar="AGENT", help="take only these agents' cells from the parts")
     args = p.parse_args(argv)
     agents = tuple(args.agents) if args.agents else None
+    swallowed = [a for a in agents or () if (Path(a) / "results.json").exists()]
+    if swallowed:  # `--agents a b PART`: argparse hands the part folders to --agents
+        p.error(f"--agents took the part folder {swallowed[0]} for an agent name: put --agents after the parts")
     try:
         notes, rows = merge(args.into, args.parts, args.with_agent, args.replace, agents)
     except MergeError as e:

@@ -810,7 +810,9 @@ def test_merge_gathers_grids_run_in_parts_and_refuses_parts_of_other_experiments
     assert merged[1]["final"]["online_return"] == changed["final"]["online_return"]
 
 
-def test_merge_takes_some_agents_from_committed_grids_and_keeps_where_each_cell_came_from(tmp_path, tiny_config):
+def test_merge_takes_some_agents_from_committed_grids_and_keeps_where_each_cell_came_from(
+    tmp_path, tiny_config, capsys
+):
     """`--agents` pools some agents' seeds out of merged (committed) grids; a cell merged twice keeps its
     first source, git commit and grid arguments, with `via` naming the merged grid it passed through."""
     from hyperstate.evaluation.merge import main as merge_main
@@ -840,6 +842,11 @@ def test_merge_takes_some_agents_from_committed_grids_and_keeps_where_each_cell_
     # An agent none of the parts has: refused, nothing written.
     assert merge_main([str(committed), "--agents", "hyperx", "--into", str(tmp_path / "none")]) == 2
     assert not (tmp_path / "none").exists()
+    # --agents before a part folder would take the folder for an agent: refused with a one-line error.
+    with pytest.raises(SystemExit) as exit_info:
+        merge_main([str(committed), "--agents", "oracle", str(one), "--into", str(tmp_path / "none")])
+    assert exit_info.value.code == 2 and not (tmp_path / "none").exists()
+    assert f"took the part folder {one} for an agent name" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
