@@ -170,8 +170,8 @@ def bayes_bracket(row: dict) -> list[tuple[float, str, str]]:
 
 
 def write_figures(out: Path, records: list[dict]) -> list[Path]:
-    """Per task: learning curves (mean over seeds, 95 % CI band) beside hyper-state coverage; and a
-    behaviour plot per agent × task."""
+    """Per task: learning curves (mean over seeds, 95 % CI band), beside hyper-state coverage where the
+    task measures it; and a behaviour plot per agent × task."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -183,39 +183,9 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
     tasks = sorted({r["task"] for r in records})
     bracket = {row["task"]: row for row in summary_rows(records)}  # Bayes-optimal bracket per task
     for task in tasks:
-        if not any(r["curve"] for r in records if r["task"] == task):
-            continue  # deployed saved agents (run.py --deploy): no training, no curves
-        fig, (ax, cov_ax) = plt.subplots(1, 2, figsize=(11, 4))
-        agents_ = sorted({r["agent"] for r in records if r["task"] == task})
-        for agent in agents_:
-            cells = [r for r in records if r["task"] == task and r["agent"] == agent and r["curve"]]
-            if not cells:
-                continue
-            length = min(len(r["curve"]) for r in cells)
-            frames = np.array([p["frames"] for p in cells[0]["curve"][:length]])
-            curves = np.array([[p["online_return"] for p in r["curve"][:length]] for r in cells])
-            mean, low, high = mean_ci_curve(curves)
-            (line,) = ax.plot(frames, mean, label=f"{agent} ({len(cells)})")
-            ax.fill_between(frames, low, high, color=line.get_color(), alpha=0.2)
-            if all("coverage" in p for r in cells for p in r["curve"][:length]):
-                coverage = np.array([[p["coverage"] for p in r["curve"][:length]] for r in cells])
-                mean, low, high = mean_ci_curve(coverage)
-                cov_ax.plot(frames, mean, color=line.get_color(), label=agent)
-                cov_ax.fill_between(frames, low, high, color=line.get_color(), alpha=0.2)
-        for value, label, style in bayes_bracket(bracket.get(task, {})):
-            ax.axhline(value, color="0.3", linestyle=style, linewidth=1, label=label)
-        ax.set_xlabel("frames")
-        ax.set_ylabel("online return at deployment")
-        ax.set_title(task)
-        ax.legend(fontsize=8)
-        cov_ax.set_xlabel("frames")
-        cov_ax.set_ylabel("hyper-state coverage (position × belief cells visited)")
-        cov_ax.set_title("pseudo-exploration during meta-training")
-        fig.tight_layout()
-        path = figures / f"curves_{task}.png"
-        fig.savefig(path, dpi=100)
-        plt.close(fig)
-        written.append(path)
+        path = _curves_plot(records, task, bracket.get(task, {}), figures, plt)
+        if path is not None:
+            written.append(path)
     for task in tasks:
         path = _probe_plot(records, task, figures, plt)
         if path is not None:
@@ -225,6 +195,55 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
         if path is not None:
             written.append(path)
     return written
+
+
+def _curves_plot(records: list[dict], task: str, bracket_row: dict, figures: Path, plt) -> Path | None:
+    """Online return at deployment over training (mean over seeds, 95 % CI band) with the Bayes bracket,
+    beside hyper-state coverage where the task measures it."""
+    if not any(r["curve"] for r in records if r["task"] == task):
+        return None  # deployed saved agents (run.py --deploy): no training, no curves
+    by_agent = {}
+    for agent in sorted({r["agent"] for r in records if r["task"] == task}):
+        cells = [r for r in records if r["task"] == task and r["agent"] == agent and r["curve"]]
+        if cells:
+            length = min(len(r["curve"]) for r in cells)
+            by_agent[agent] = (cells, length)
+    # Coverage is measured only where the task defines a hyper-state grid; without it, one panel.
+    covered = {
+        agent
+        for agent, (cells, length) in by_agent.items()
+        if all("coverage" in p for r in cells for p in r["curve"][:length])
+    }
+    if covered:
+        fig, (ax, cov_ax) = plt.subplots(1, 2, figsize=(11, 4))
+    else:
+        fig, ax = plt.subplots(figsize=(6, 4))
+    for agent, (cells, length) in by_agent.items():
+        frames = np.array([p["frames"] for p in cells[0]["curve"][:length]])
+        curves = np.array([[p["online_return"] for p in r["curve"][:length]] for r in cells])
+        mean, low, high = mean_ci_curve(curves)
+        (line,) = ax.plot(frames, mean, label=f"{agent} ({len(cells)})")
+        ax.fill_between(frames, low, high, color=line.get_color(), alpha=0.2)
+        if agent in covered:
+            coverage = np.array([[p["coverage"] for p in r["curve"][:length]] for r in cells])
+            mean, low, high = mean_ci_curve(coverage)
+            cov_ax.plot(frames, mean, color=line.get_color(), label=agent)
+            cov_ax.fill_between(frames, low, high, color=line.get_color(), alpha=0.2)
+    for value, label, style in bayes_bracket(bracket_row):
+        ax.axhline(value, color="0.3", linestyle=style, linewidth=1, label=label)
+    ax.set_xlabel("frames")
+    ax.set_ylabel("online return at deployment")
+    ax.set_title(task)
+    ax.legend(fontsize=8)
+    if covered:
+        cov_ax.set_xlabel("frames")
+        cov_ax.set_ylabel("hyper-state coverage (position × belief cells visited)")
+        cov_ax.set_title("pseudo-exploration during meta-training")
+    fig.tight_layout()
+    path = figures / f"curves_{task}.png"
+    fig.savefig(path, dpi=100)
+    plt.close(fig)
+    return path
 
 
 def _probe_plot(records: list[dict], task: str, figures: Path, plt) -> Path | None:

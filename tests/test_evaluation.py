@@ -886,3 +886,33 @@ def test_the_catalogue_script_trains_and_deploys_both_ways(tmp_path, tiny_config
     assert len(record["final"]["online_return_per_task"]) == 48
     assert "online_return" in record["final"]["stochastic"]
     assert "goals_reached" in record["final"]
+
+
+def _png_size(path: Path) -> tuple[int, int]:
+    header = path.read_bytes()[:24]
+    assert header[:8] == b"\x89PNG\r\n\x1a\n"
+    return int.from_bytes(header[16:20], "big"), int.from_bytes(header[20:24], "big")
+
+
+def test_the_coverage_panel_is_drawn_only_for_a_task_that_measures_coverage(tmp_path):
+    """cheetah_dir_sparse declares a hyper-state grid, so its curves sit beside coverage; point_treasure_sparse
+    declares none, so its figure is the curves alone rather than an empty second panel."""
+    from hyperstate.evaluation.cell import load_records
+    from hyperstate.evaluation.report import write_figures
+
+    results = ROOT / "docs" / "results"
+    for source, task in (
+        (results / "fig2_turnaround", "cheetah_dir_sparse"),
+        (results / "calibration" / "point_treasure_sparse", "point_treasure_sparse"),
+    ):
+        records = load_records(source)
+        assert records and all(r["curve"] for r in records)
+        covered = all("coverage" in p for r in records for p in r["curve"])
+        out = tmp_path / task
+        written = write_figures(out, records)
+        curves = out / "figures" / f"curves_{task}.png"
+        assert curves in written
+        width, height = _png_size(curves)
+        assert height == 400
+        assert width == (1100 if covered else 600)
+        assert covered == (task == "cheetah_dir_sparse")
