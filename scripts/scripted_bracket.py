@@ -2,7 +2,8 @@
 
     .venv/bin/python scripts/scripted_bracket.py [--out bench/results/scripted_bracket.json]
 
-mountain_treasure_sparse: `MountainClimber` and `CircleWalker` on 64 evenly spaced treasures.
+mountain_treasure_sparse: `MountainClimber` and `CircleWalker` on 64 evenly spaced treasures;
+mountain_treasure_k8_sparse: the same on its prior's 8 treasures.
 rooms_sparse: `RoomsExplorer` on each of the 48 tasks.
 point_treasure_sparse: `PointExplorer` over the 4 candidates, `PointExplorer` of the first candidate
 alone (one guess, kept: what an agent that does not explore earns) and `PointGoalSeeker` (task-aware), on
@@ -86,7 +87,12 @@ def main(argv: list[str] | None = None) -> dict:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("bench/results/scripted_bracket.json"))
     args = parser.parse_args(argv)
-    result = {"mountain_treasure_sparse": mountain(), "rooms_sparse": rooms_explorer(), **point_tasks()}
+    result = {
+        "mountain_treasure_sparse": mountain(),
+        "mountain_treasure_k8_sparse": mountain(angles=8),
+        "rooms_sparse": rooms_explorer(),
+        **point_tasks(),
+    }
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(json.dumps(result, indent=2) + "\n")
     print(json.dumps(result, indent=2))

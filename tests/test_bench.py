@@ -384,6 +384,12 @@ def test_scripted_bracket_ranks_the_mountain_strategies(tmp_path):
     climber, walker = result["MountainClimber"], result["CircleWalker"]
     assert climber["treasures"] == walker["treasures"] == 8
     assert climber["min"] <= climber["mean"] <= climber["max"] and climber["mean"] > walker["mean"]
+    # The 8 angles are mountain_treasure_k8_sparse's whole prior, so this is that task's bracket too.
+    from hyperstate import suite
+
+    support = suite.task_prior("mountain_treasure_k8_sparse").support()
+    angles = np.linspace(0, 2 * np.pi, 8, endpoint=False)
+    np.testing.assert_allclose(support, np.stack([np.cos(angles), np.sin(angles)], 1), atol=1e-12)
 
 
 def test_scripted_bracket_ranks_the_point_strategies():
