@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import collections
 import copy
+from collections.abc import Callable
 from typing import Literal
 
 import mujoco
@@ -280,17 +281,36 @@ class QuadrupedGoalBatch(MujocoBatch):
 
 def goal_metrics(observations, rewards, tasks, **_) -> dict[str, np.ndarray]:
     """Per deployment: `goal_reached` (any rewarded step), `first_goal_step` (1-based, NaN if never),
-    `closest_distance` (the torso's closest approach to the goal, m)."""
-    reached = (np.asarray(rewards) > 0).any(axis=0)
+    `closest_distance` (the torso's closest approach to the goal, m), `last_episode_at_goal` (fraction of
+    the last MDP episode's steps rewarded: exploitation, once the goal is known)."""
+    rewarded = np.asarray(rewards) > 0  # (T, M)
+    reached = rewarded.any(axis=0)
     distance = np.linalg.norm(observations["position"] - np.asarray(tasks)[None], axis=-1)
+    # MDP episodes have equal lengths, so the last one is the last T / episodes steps.
+    episodes = int(np.max(observations["inner_episode"])) + 1
     return {
         "goal_reached": reached.astype(float),
-        "first_goal_step": np.where(reached, (np.asarray(rewards) > 0).argmax(axis=0) + 1.0, np.nan),
+        "first_goal_step": np.where(reached, rewarded.argmax(axis=0) + 1.0, np.nan),
         "closest_distance": distance.min(axis=0),
+        "last_episode_at_goal": rewarded[len(rewarded) - len(rewarded) // episodes :].mean(axis=0),
     }
 
 
-def _register(name: str, *, region: str, distance: float, radius: float, episodes: int) -> None:
+def finds_the_goal(final: dict) -> bool:
+    """Success on `quadruped_goal_sparse` (one MDP episode): the goal found in at least 90 % of deployments."""
+    return final.get("goal_reached", 0.0) >= 0.9
+
+
+def finds_and_returns(final: dict) -> bool:
+    """Success on `quadruped_antgoal_sparse` (six MDP episodes): the goal found in at least 90 % of
+    deployments, and at it for at least half of the last MDP episode's steps on average (as the point
+    robot's; a threshold, not measured against a scripted walker, which the quadruped does not have)."""
+    return final.get("goal_reached", 0.0) >= 0.9 and final.get("last_episode_at_goal", 0.0) >= 0.5
+
+
+def _register(
+    name: str, *, region: str, distance: float, radius: float, episodes: int, success: Callable[[dict], bool]
+) -> None:
     def factory(
         seed: SeedLike = None,
         *,
@@ -335,9 +355,16 @@ def _register(name: str, *, region: str, distance: float, radius: float, episode
 
     factory.__name__ = factory.__qualname__ = name
     factory.__doc__ = f"`{name}`: quadruped walking to a goal it must find (see suite.quadruped_goal)."
-    register(name, batch=batch_factory, metrics=goal_metrics, position_keys=("position",))(factory)
+    register(name, batch=batch_factory, metrics=goal_metrics, position_keys=("position",), success=success)(factory)
 
 
-_register("quadruped_goal_sparse", region="circle", distance=GOAL_DISTANCE, radius=GOAL_RADIUS, episodes=1)
+_register(
+    "quadruped_goal_sparse",
+    region="circle",
+    distance=GOAL_DISTANCE,
+    radius=GOAL_RADIUS,
+    episodes=1,
+    success=finds_the_goal,
+)
 # The HyperX reference's sparse AntGoal: goals in a 3 m disc, 0.75 m radius, 6 MDP episodes per task.
-_register("quadruped_antgoal_sparse", region="disc", distance=3.0, radius=0.75, episodes=6)
+_register("quadruped_antgoal_sparse", region="disc", distance=3.0, radius=0.75, episodes=6, success=finds_and_returns)

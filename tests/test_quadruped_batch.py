@@ -105,3 +105,28 @@ def test_snapshot_continues_identically_across_episode_ends():
             for k in want.observation:
                 np.testing.assert_array_equal(got.observation[k], want.observation[k], err_msg=k)
                 np.testing.assert_array_equal(got.final_observation[k], want.final_observation[k], err_msg=k)
+
+
+def test_goal_metrics_and_success_on_known_rewards():
+    """Six MDP episodes of 4 steps: deployment 0 is rewarded at step 6 and through the last episode,
+    deployment 1 never; the antgoal criterion needs the return, the one-episode task only the find."""
+    from hyperstate.suite.quadruped_goal import goal_metrics
+
+    rewards = np.zeros((24, 2))
+    rewards[5, 0] = 1.0
+    rewards[21:, 0] = 1.0  # 3 of the last episode's 4 steps
+    observations = {
+        "position": np.zeros((24, 2, 2)),
+        "inner_episode": np.repeat(np.arange(6.0), 4)[:, None, None] * np.ones((1, 2, 1)),
+    }
+    m = goal_metrics(observations, rewards, np.array([[1.0, 0.0], [0.0, 2.0]]))
+    np.testing.assert_array_equal(m["goal_reached"], [1.0, 0.0])
+    np.testing.assert_array_equal(m["first_goal_step"], [6.0, np.nan])
+    np.testing.assert_allclose(m["closest_distance"], [1.0, 2.0])
+    np.testing.assert_allclose(m["last_episode_at_goal"], [0.75, 0.0])
+
+    antgoal, goal = suite.success("quadruped_antgoal_sparse"), suite.success("quadruped_goal_sparse")
+    assert antgoal({"goal_reached": 0.95, "last_episode_at_goal": 0.6})
+    assert not antgoal({"goal_reached": 0.95, "last_episode_at_goal": 0.4})
+    assert not antgoal({"goal_reached": 0.85, "last_episode_at_goal": 0.9})
+    assert goal({"goal_reached": 0.9}) and not goal({"goal_reached": 0.85})
