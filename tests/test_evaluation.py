@@ -916,3 +916,26 @@ def test_the_coverage_panel_is_drawn_only_for_a_task_that_measures_coverage(tmp_
         assert height == 400
         assert width == (1100 if covered else 600)
         assert covered == (task == "cheetah_dir_sparse")
+
+
+def test_catalogue_log_rows_read_curve_wall_and_task_metrics_from_records(tmp_path):
+    """research/catalogue/log_rows.py: the log's row of a cell is its curve (last point bold), the last
+    point's wall time and the final deployment's declared metrics; an unfinished cell says so."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("log_rows", ROOT / "research" / "catalogue" / "log_rows.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    for name, complete in (("a__t__s0", True), ("b__t__s1", False)):
+        cell = tmp_path / "cells" / name
+        cell.mkdir(parents=True)
+        curve = [{"frames": 1_000_000 * (i + 1), "online_return": r, "wall_seconds": 60.0 * (i + 1)}
+                 for i, r in enumerate((-5.0, 12.25))]  # fmt: skip
+        final = {"exploration_metric_names": ["goal_reached"], "goal_reached": 0.5, "online_return": 12.25}
+        record = {"agent": name[0], "seed": int(name[-1]), "curve": curve, "final": final, "complete": complete}
+        (cell / "record.json").write_text(json.dumps(record))
+    lines = module.markdown(module.cell_rows(tmp_path)).splitlines()
+    assert lines[2] == "| a | 0 | 120 s | -5.0, **12.2** | `goal_reached` 0.5 |"
+    assert lines[3] == "| b | 1 | 120 s (unfinished, 2,000,000 frames) | -5.0, **12.2** | `goal_reached` 0.5 |"
+    with pytest.raises(SystemExit, match="no cells"):
+        module.cell_rows(tmp_path / "cells")
