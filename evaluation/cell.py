@@ -392,6 +392,23 @@ def load_records(out: Path) -> list[dict]:
     return records
 
 
+def record_progress(record: dict) -> dict:
+    """Where a cell stands, finished or not: agent, task, seed, complete, the last evaluation point's frames
+    and wall seconds (0 and None before the first), the online return at every point, and the final
+    deployment's entry (empty before it)."""
+    curve = record.get("curve") or []
+    return {
+        "agent": record["agent"],
+        "task": record.get("task"),
+        "seed": record["seed"],
+        "complete": bool(record.get("complete")),
+        "frames": curve[-1]["frames"] if curve else 0,
+        "wall_seconds": curve[-1].get("wall_seconds") if curve else None,
+        "curve": [point["online_return"] for point in curve],
+        "final": record.get("final") or {},
+    }
+
+
 def write_results(out: Path) -> None:
     """`OUT/results.json`: one record per cell (the contract), written atomically."""
     write_json_atomic(out / grid.RESULTS, load_records(out))

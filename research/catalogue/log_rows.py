@@ -10,31 +10,22 @@ Markdown table per folder.
 from __future__ import annotations
 
 import argparse
-import json
 from pathlib import Path
+
+from hyperstate.evaluation.cell import load_records, record_progress
 
 
 def cell_rows(folder: Path) -> list[dict]:
-    """One row per cell of `folder`: agent, seed, frames, wall seconds, curve, final metrics, complete."""
-    records = sorted(folder.glob("cells/*/record.json"))
+    """One row per cell of `folder` (evaluation.cell.record_progress), with the final deployment's declared
+    task metrics only."""
+    records = load_records(folder)
     if not records:
         raise SystemExit(f"{folder}: no cells/*/record.json (not an evaluation/run.py results folder)")
     rows = []
-    for path in records:
-        record = json.loads(path.read_text())
-        curve = record.get("curve") or []
-        final = record.get("final") or {}
-        rows.append(
-            {
-                "agent": record["agent"],
-                "seed": record["seed"],
-                "frames": curve[-1]["frames"] if curve else 0,
-                "wall_seconds": curve[-1]["wall_seconds"] if curve else 0.0,
-                "curve": [point["online_return"] for point in curve],
-                "final": {name: final.get(name) for name in final.get("exploration_metric_names", [])},
-                "complete": bool(record.get("complete")),
-            }
-        )
+    for record in records:
+        row = record_progress(record)
+        final = row["final"]
+        rows.append({**row, "final": {name: final.get(name) for name in final.get("exploration_metric_names", [])}})
     return rows
 
 
@@ -50,7 +41,7 @@ def markdown(rows: list[dict]) -> str:
         final = ", ".join(f"`{name}` {_number(value)}" for name, value in row["final"].items())
         state = "" if row["complete"] else f" (unfinished, {row['frames']:,} frames)"
         lines.append(
-            f"| {row['agent']} | {row['seed']} | {row['wall_seconds']:,.0f} s{state} | "
+            f"| {row['agent']} | {row['seed']} | {row['wall_seconds'] or 0:,.0f} s{state} | "
             f"{curve}{', ' if curve else ''}{last} | {final} |"
         )
     return "\n".join(lines)

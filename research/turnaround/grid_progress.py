@@ -12,26 +12,22 @@ import csv
 import json
 from pathlib import Path
 
+from hyperstate.evaluation.cell import load_records, record_progress
+
 COLUMNS = ("left_zone", "correct_direction", "stuck")
 
 
 def rows(out: Path) -> list[dict]:
     table = []
-    for record_file in sorted(out.glob("cells/*/record.json")):
-        r = json.loads(record_file.read_text())
-        curve = r.get("curve") or []
-        final = r.get("final") or {}
+    for record in load_records(out):
+        cell = record_progress(record)
         table.append(
             {
-                "agent": r["agent"],
-                "task": r["task"],
-                "seed": r["seed"],
-                "complete": bool(r.get("complete")),
-                "frames": curve[-1]["frames"] if curve else 0,
-                "online_return": curve[-1]["online_return"] if curve else None,
-                "curve": [round(p["online_return"], 1) for p in curve],
-                "wall_seconds": curve[-1].get("wall_seconds") if curve else None,
-                **{k: final.get(k) for k in COLUMNS},
+                **{key: cell[key] for key in ("agent", "task", "seed", "complete", "frames")},
+                "online_return": cell["curve"][-1] if cell["curve"] else None,
+                "curve": [round(value, 1) for value in cell["curve"]],
+                "wall_seconds": cell["wall_seconds"],
+                **{key: cell["final"].get(key) for key in COLUMNS},
             }
         )
     return table
