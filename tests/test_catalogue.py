@@ -187,6 +187,12 @@ def test_point_robot_velocity_follows_the_action_with_a_time_constant():
     for _ in range(40):
         env.step(np.array([1.0, 0.0]))
     assert env.physics.data.qpos[0] == pytest.approx(1.5, abs=0.02)  # pressed against the arena's edge
+    # The joint limit is soft: pressed into the corner, the robot stands past the walls but inside the plot.
+    x_min, x_max, y_min, y_max = suite.top_down("point_robot_sparse").extent
+    for _ in range(40):
+        env.step(np.array([1.0, 1.0]))
+    x, y = env.physics.data.qpos[:2]
+    assert x > 1.5 and y > 1.5 and x < x_max and y < y_max
 
 
 def test_half_circle_prior_continuous_and_finite():
@@ -416,7 +422,7 @@ def test_point_tasks_top_down_view_draws_candidates_goal_and_each_episode(tmp_pa
     support = suite.task_prior("point_treasure_sparse").support()
     for name, circles in (("point_treasure_sparse", 4 + 1), ("point_robot_sparse", 1)):
         view = suite.top_down(name)
-        assert view.key == "position" and view.extent == (-1.5, 1.5, -1.5, 1.5)  # the arena's walls
+        assert view.key == "position" and view.extent == (-1.6, 1.6, -1.6, 1.6)  # the floor, walls at 1.5
         fig, ax = plt.subplots()
         view.draw_scene(ax, support[2])
         discs = [p for p in ax.patches if isinstance(p, matplotlib.patches.Circle)]
