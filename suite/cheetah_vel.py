@@ -15,6 +15,7 @@ import numpy as np
 from dm_control.rl import control
 
 from hyperstate.suite._cheetah import (
+    CONTROL_TIMESTEP,
     COVERAGE,
     CTRL_COST_WEIGHT,
     EPISODE_LENGTH,
@@ -29,6 +30,9 @@ from hyperstate.suite._seeding import SeedLike
 
 MIN_VELOCITY, MAX_VELOCITY = 0.0, 3.0  # m/s
 VELOCITY_TOLERANCE = 1.0  # m/s: the velocity reward falls linearly from 1 at v* to 0 at this error
+# Success: the mean speed error outside the zone at most this. No single speed gets there: the best one
+# errs 0.75 m/s on average under the prior (0.76 on the 20 held-out tasks), so meeting it needs v* inferred.
+SUCCESS_VELOCITY_ERROR = 0.5  # m/s
 
 
 class VelocityPrior:
@@ -102,9 +106,16 @@ def velocity_metrics(
 ) -> dict[str, np.ndarray]:
     """Deployed-exploration metrics of M deployments: `left_zone`, `first_exit_step` (1-based, NaN if
     never), `on_target_fraction` (fraction of the steps after the first exit with the reward's velocity
-    term > 0, i.e. reward above the largest possible control cost; NaN if never left)."""
+    term > 0, i.e. reward above the largest possible control cost; NaN if never left), and
+    `velocity_error`: the mean |vx - v*| over the steps that end outside the zone, the steps whose reward
+    measures v* (NaN if none). A new MDP episode's first step ends near the start, inside the zone (the
+    zone is many steps wide), so the jump back to the start is never taken for a speed."""
     x = observations["x_displacement"][..., 0]
     outside = np.abs(x) >= zone_radius
+    vx = np.diff(x, axis=0, prepend=0.0) / CONTROL_TIMESTEP
+    error = np.abs(vx - np.asarray(tasks)[None, :, 0])
+    count = outside.sum(axis=0)
+    velocity_error = np.where(count > 0, (error * outside).sum(axis=0) / np.maximum(count, 1), np.nan)
     left = outside.any(axis=0)
     first = outside.argmax(axis=0)
     steps = np.arange(len(x))[:, None]
@@ -116,7 +127,15 @@ def velocity_metrics(
         "left_zone": left.astype(float),
         "first_exit_step": np.where(left, first + 1.0, np.nan),
         "on_target_fraction": fraction,
+        "velocity_error": velocity_error,
     }
+
+
+def follows_the_target(final: dict) -> bool:
+    """A seed solved the sparse task: it left the zone in ≥ 90 % of deployments and, outside it, ran within
+    `SUCCESS_VELOCITY_ERROR` of the target speed on average (which no single speed does)."""
+    error = final.get("velocity_error")
+    return final.get("left_zone", 0.0) >= 0.9 and error is not None and error <= SUCCESS_VELOCITY_ERROR
 
 
 def _register(name: str, zone_radius: float) -> None:
@@ -162,6 +181,7 @@ def _register(name: str, zone_radius: float) -> None:
         reference_task=reference,
         position_axis=position_axis(zone_radius),
         coverage=COVERAGE,
+        success=follows_the_target if zone_radius > 0 else None,
     )(factory)
 
 

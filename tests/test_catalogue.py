@@ -11,7 +11,7 @@ import pytest
 from dm_env import test_utils
 
 from hyperstate import suite
-from hyperstate.suite.cheetah_vel import CheetahVelocity
+from hyperstate.suite.cheetah_vel import CheetahVelocity, follows_the_target, velocity_metrics
 from hyperstate.suite.point_robot import HalfCircleGoalPrior, goal_metrics
 from hyperstate.suite.scripted import gait
 
@@ -307,6 +307,46 @@ def test_cheetah_velocity_reward_recomputed_from_physics():
         assert step.reward == pytest.approx(expected, abs=1e-12)
         paid += outside and abs(velocity - target) < 1.0
     assert paid > 0  # the scripted gait passes through the target speed somewhere outside the zone
+
+
+def test_cheetah_velocity_error_recomputed_from_physics():
+    target, zone = 1.0, 0.5
+    env = suite.load("cheetah_vel_sparse", seed=2, target_velocity=target, zone_radius=zone, privileged=True)
+    env.reset()
+    x_start = float(env.physics.named.data.qpos["rootx"][0])
+    run, xs, velocities, rewards, errors = gait(1.0), [], [], [], []
+    for t in range(200):
+        x_before = float(env.physics.named.data.qpos["rootx"][0])
+        step = env.step(run(t))
+        x = float(env.physics.named.data.qpos["rootx"][0])
+        xs.append(step.observation["x_displacement"])
+        velocities.append(step.observation["velocity"])
+        rewards.append(step.reward)
+        if abs(x - x_start) >= zone:
+            errors.append(abs((x - x_before) / 0.05 - target))
+    assert len(errors) > 100
+    observations = {"x_displacement": np.array(xs)[:, None], "velocity": np.array(velocities)[:, None]}
+    metrics = velocity_metrics(observations, np.array(rewards)[:, None], np.array([[target]]), zone_radius=zone)
+    assert metrics["velocity_error"][0] == pytest.approx(np.mean(errors), abs=1e-9)
+
+
+def test_cheetah_velocity_error_skips_the_reset_and_success_needs_the_target():
+    """Two MDP episodes at 2 m/s (0.1 m a step) with v* = 1.5: every measured step errs 0.5 m/s; the jump
+    back to the start is not a speed. A deployment that never leaves has no error."""
+    steps = np.arange(10)
+    x = np.concatenate([0.1 * (steps + 1), 0.1 * (steps + 1)])
+    observations = {
+        "x_displacement": np.stack([x, np.zeros_like(x)], axis=1)[..., None],
+        "velocity": np.zeros((20, 2, 9)),
+    }
+    metrics = velocity_metrics(observations, np.zeros((20, 2)), np.array([[1.5], [1.5]]), zone_radius=0.35)
+    assert metrics["velocity_error"][0] == pytest.approx(0.5, abs=1e-9) and np.isnan(metrics["velocity_error"][1])
+    success = suite.success("cheetah_vel_sparse")
+    assert success is follows_the_target and suite.success("cheetah_vel") is None
+    assert success({"left_zone": 1.0, "velocity_error": 0.5})
+    assert not success({"left_zone": 1.0, "velocity_error": 0.76})  # the best single speed on the held-out tasks
+    assert not success({"left_zone": 0.85, "velocity_error": 0.1})
+    assert not success({"left_zone": 0.0, "velocity_error": None})
 
 
 def test_cheetah_velocity_prior_and_arguments():
