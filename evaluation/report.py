@@ -171,7 +171,7 @@ def bayes_bracket(row: dict) -> list[tuple[float, str, str]]:
 
 def write_figures(out: Path, records: list[dict]) -> list[Path]:
     """Per task: learning curves (mean over seeds, 95 % CI band), beside hyper-state coverage where the
-    task measures it; and a behaviour plot per agent × task."""
+    task measures it; and behaviour plots per agent × task (`drawn_cells`)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -191,10 +191,20 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
         if path is not None:
             written.append(path)
     for cells in _by_agent_task(records).values():
-        path = _behaviour_plot(out, min(cells, key=lambda r: r["seed"]), figures, plt)
-        if path is not None:
-            written.append(path)
+        for record in drawn_cells(cells):
+            path = _behaviour_plot(out, record, figures, plt)
+            if path is not None:
+                written.append(path)
     return written
+
+
+def drawn_cells(cells: list[dict]) -> list[dict]:
+    """The cells of one agent × task whose behaviour is drawn: the lowest seed, the same figure whatever
+    seeds a grid adds, and the seed with the lowest online return where that is another, so that a
+    failing seed has its picture."""
+    first = min(cells, key=lambda r: r["seed"])
+    worst = min(cells, key=lambda r: (r["final"].get("online_return", np.inf), r["seed"]))
+    return [first] if worst is first else [first, worst]
 
 
 def _curves_plot(records: list[dict], task: str, bracket_row: dict, figures: Path, plt) -> Path | None:

@@ -15,6 +15,7 @@ import tomllib
 
 from hyperstate import agents, suite
 from hyperstate.agents import serialization
+from hyperstate.evaluation import report
 from hyperstate.evaluation.deploy import deploy, deployment_metrics, evaluation_tasks
 from hyperstate.evaluation.stats import bootstrap_ci, iqm
 from hyperstate.suite.cheetah_dir import BACKWARD, FORWARD
@@ -65,6 +66,16 @@ def test_iqm_and_bootstrap_ci():
 
 
 # Deployment -----------------------------------------------------------------------------------------
+def test_behaviour_is_drawn_for_the_lowest_and_the_worst_seed():
+    def cell(seed, online_return):
+        return {"seed": seed, "final": {"online_return": online_return}}
+
+    cells = [cell(2, 5.0), cell(0, 3.0), cell(1, -7.0)]
+    assert [r["seed"] for r in report.drawn_cells(cells)] == [0, 1]
+    assert [r["seed"] for r in report.drawn_cells([cell(1, 4.0), cell(0, -1.0)])] == [0]
+    assert [r["seed"] for r in report.drawn_cells([cell(3, 1.0), cell(1, 2.0), cell(2, 1.0)])] == [1, 2]
+
+
 def test_evaluation_tasks_cover_a_finite_prior():
     tasks = evaluation_tasks("cheetah_dir_sparse", 5)
     assert tasks.shape == (5, 1) and set(tasks[:, 0]) == {-1.0, 1.0}
@@ -149,6 +160,11 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
     assert "curves_cheetah_dir_sparse.png" in figures and "probe_cheetah_dir_sparse.png" in figures
     assert all(len(r["final"]["probe_kl_per_step"]) == 200 for r in records)  # one BAMDP episode of 200 steps
     assert "behaviour_oracle__cheetah_dir_sparse__s0.png" in figures
+    for agent in {r["agent"] for r in records}:  # the lowest seed and, where another, the worst one
+        cells = [r for r in records if r["agent"] == agent]
+        worst = min(cells, key=lambda r: (r["final"]["online_return"], r["seed"]))["seed"]
+        drawn = {f for f in figures if f.startswith(f"behaviour_{agent}__")}
+        assert drawn == {f"behaviour_{agent}__cheetah_dir_sparse__s{seed}.png" for seed in {0, worst}}, agent
     assert all((out / "figures" / f).read_bytes()[:4] == b"\x89PNG" for f in figures)
     assert any((out / "tb").rglob("events.out.tfevents.*"))
     assert "oracle" in proc.stdout and "IQM" in proc.stdout  # the closing text table
