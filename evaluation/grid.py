@@ -1,6 +1,8 @@
 """The results layout of a grid: every name and path under `--out`, in one place.
 
     OUT/grid.json                 the grid's arguments (what --resume must match)      driver
+    OUT/commands.jsonl            every invocation on OUT: command, commit, processor,
+                                  start, end and wall time                              driver
     OUT/results.json              one record per cell                                   driver
     OUT/summary.csv, OUT/figures/ the report                                            driver
     OUT/tb/<cell>/                tensorboard scalars                                   the cell
@@ -21,6 +23,8 @@ from pathlib import Path
 SEPARATOR = "__"
 
 GRID = "grid.json"
+# One JSON line per invocation of the driver on OUT (a resumed grid has several): where its cells came from.
+COMMANDS = "commands.jsonl"
 RESULTS = "results.json"
 SUMMARY = "summary.csv"
 FIGURES = "figures"

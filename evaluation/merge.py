@@ -12,9 +12,10 @@ snapshots or tensorboard logs.
 A merged grid is one experiment, so the parts must agree: every cell has the same training budget, evaluation
 points and held-out tasks, and all seeds of one agent were trained with one configuration. A part that breaks
 this is refused with the differences named, and nothing is written. Unfinished cells are listed and left
-out. `OUT/sources.json` says where each cell came from: the part's folder, its grid arguments and the
-git commit of the code that trained it. A part that is itself a merged grid (a committed results folder)
-passes on its own sources.json entries, with `via` naming it. `--agents` takes only some agents' cells, e.g.
+out. `OUT/sources.json` says where each cell came from: the part's folder, its grid arguments, the
+git commit of the code that trained it and the part's command lines (its `commands.jsonl`). A part that is
+itself a merged grid (a committed results folder) passes on its own sources.json entries, with `via`
+naming it. `--agents` takes only some agents' cells, e.g.
 to pool the seeds of two agents from two committed grids:
 
     python evaluation/merge.py --into docs/results/seeds docs/results/grid runs/more --agents hyperx oracle_rh
@@ -29,7 +30,7 @@ import sys
 from pathlib import Path
 
 from hyperstate.agents.config import RUNTIME_FIELDS, AgentConfig, agent_settings, from_dict
-from hyperstate.evaluation import cli, grid
+from hyperstate.evaluation import cli, grid, provenance
 from hyperstate.evaluation.cell import load_records, write_results
 from hyperstate.evaluation.report import text_table, write_figures, write_summary
 from hyperstate.files import write_json_atomic
@@ -86,6 +87,8 @@ def _describe_cell(record: dict, source: Path) -> dict:
         "eval_every": arguments.get("eval_every", record["curve"][0]["frames"] if record["curve"] else None),
         "overrides": arguments.get("overrides", {}).get(record["agent"]),
         "git_commit": record.get("versions", {}).get("git_commit"),
+        # The part's invocations (evaluation/run.py writes them; a part written before it did has none).
+        "commands": provenance.read_commands(source / grid.COMMANDS),
     }
 
 

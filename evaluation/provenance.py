@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import json
 import platform
+import shlex
 import subprocess
+from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
 
@@ -16,18 +19,56 @@ def versions() -> dict:
             out[package] = metadata.version(package)
         except metadata.PackageNotFoundError:
             out[package] = None
+    out["git_commit"] = git_commit()
+    out["cpu"] = cpu_description()
+    return out
+
+
+def git_commit() -> str | None:
+    """The commit of this checkout's code (None outside a git checkout)."""
     try:
         root = Path(__file__).resolve().parents[1]
-        out["git_commit"] = (
+        return (
             subprocess.run(
                 ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, timeout=10
             ).stdout.strip()
             or None
         )
     except (OSError, subprocess.SubprocessError):
-        out["git_commit"] = None
-    out["cpu"] = cpu_description()
-    return out
+        return None
+
+
+def record_start(path: Path, command: list[str]) -> dict:
+    """Appends one invocation to the JSON-lines file `path`: its command line, the code's commit, the processor
+    and the start time (UTC). Returns the entry, which `record_end` completes."""
+    entry = {
+        "command": shlex.join(command),
+        "git_commit": git_commit(),
+        "cpu": cpu_description(),
+        "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+    }
+    _append_line(path, entry)
+    return entry
+
+
+def record_end(path: Path, entry: dict, wall_seconds: float, failed_cells: int) -> None:
+    """Appends the end of the invocation `entry` (from `record_start`) to `path`: the same command and start,
+    the end time, the wall time and how many cells failed. A killed run leaves its start line only."""
+    end = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    _append_line(path, {**entry, "ended": end, "wall_seconds": round(wall_seconds, 1), "failed_cells": failed_cells})
+
+
+def read_commands(path: Path) -> list[str]:
+    """The distinct command lines recorded in `path`, in order (none where it does not exist)."""
+    if not path.exists():
+        return []
+    commands = [json.loads(line)["command"] for line in path.read_text().splitlines() if line.strip()]
+    return list(dict.fromkeys(commands))
+
+
+def _append_line(path: Path, entry: dict) -> None:
+    with path.open("a") as f:
+        f.write(json.dumps(entry) + "\n")
 
 
 def cpu_description() -> str:

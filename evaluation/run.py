@@ -24,7 +24,7 @@ from pathlib import Path
 os.environ.setdefault("MUJOCO_GL", "disable")
 
 from hyperstate import agents, suite
-from hyperstate.evaluation import cli
+from hyperstate.evaluation import cli, provenance
 from hyperstate.evaluation import grid as grid_layout
 from hyperstate.evaluation.cell import CellSpec, load_records, report_failure, run_cell, write_results
 from hyperstate.evaluation.cli import UsageError
@@ -328,6 +328,8 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     workers = args.workers or max(1, (os.cpu_count() or 1) // 2)
     specs = cell_specs(args, names, overrides, skipped, eval_every, workers)
+    commands = args.out / grid_layout.COMMANDS
+    invocation = provenance.record_start(commands, [program_name(), *(sys.argv[1:] if argv is None else argv)])
     started = time.perf_counter()
     try:
         if args.executor == "ray":
@@ -344,6 +346,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{program_name()}: error: {e}", file=sys.stderr)
         return 2
     records, rows = report(args)
+    provenance.record_end(commands, invocation, time.perf_counter() - started, len(failures))
     print()
     print(text_table(rows))
     print(f"\n{len(records)} cells in {time.perf_counter() - started:.0f} s; results in {args.out}/")

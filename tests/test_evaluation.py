@@ -167,6 +167,13 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
         assert drawn == {f"behaviour_{agent}__cheetah_dir_sparse__s{seed}.png" for seed in {0, worst}}, agent
     assert all((out / "figures" / f).read_bytes()[:4] == b"\x89PNG" for f in figures)
     assert any((out / "tb").rglob("events.out.tfevents.*"))
+    # Each invocation is recorded: its command as typed, the commit, then its end and wall time.
+    start, end = [json.loads(line) for line in (out / "commands.jsonl").read_text().splitlines()]
+    assert start["command"].endswith(f"--config {tiny_config} --out {out} --no-progress")
+    assert start["command"].split()[:3] == ["evaluation/run.py", "--agents", "oracle"]
+    assert start["git_commit"] == records[0]["versions"]["git_commit"] and start["cpu"]
+    assert end == {**start, "ended": end["ended"], "wall_seconds": end["wall_seconds"], "failed_cells": 0}
+    assert end["ended"] >= start["started"] and end["wall_seconds"] > 0
     assert "oracle" in proc.stdout and "IQM" in proc.stdout  # the closing text table
 
     # Grids written by older code, without `certainty_equivalent`, the per-step probe, a task metric or the
@@ -787,6 +794,8 @@ def test_merge_gathers_grids_run_in_parts_and_refuses_parts_of_other_experiments
     assert sources["oracle__cheetah_dir_sparse__s1"]["source"] == str(parts["b"])
     assert sources["oracle__cheetah_dir_sparse__s1"]["budget"] == 400
     assert sources["oracle__cheetah_dir_sparse__s1"]["overrides"]["ppo.num_envs"] == 4
+    (command,) = sources["oracle__cheetah_dir_sparse__s1"]["commands"]
+    assert command.endswith(f"--seeds 1 --out {parts['b']}")
     before = (into / "results.json").read_text()
 
     # Another config for the same agent: refused, naming the field, and nothing written.
