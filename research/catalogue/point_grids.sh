@@ -1,0 +1,29 @@
+#!/usr/bin/env bash
+# The point tasks' grids (research/catalogue/README.md, "The point tasks' grids"), one lane per task, the
+# parts in the order they run; each part is its own OUT under runs/<task>/ and resumes where it stopped
+# (reproduce_catalogue.sh passes --resume; finished cells are skipped). Two lanes side by side on 2 cores:
+#
+#   nohup setsid bash research/catalogue/point_grids.sh point_robot_sparse >> runs/logs/laneA.log 2>&1 < /dev/null &
+#   nohup setsid bash research/catalogue/point_grids.sh point_treasure_sparse >> runs/logs/laneB.log 2>&1 < /dev/null &
+#
+# Seed 0 of the first part's agents is the calibration's (docs/results/calibration/<task>/), so that part
+# runs seeds 1 and 2; the evaluation points are the calibration's (every 1M frames).
+set -u
+cd "$(dirname "$0")/../.."
+TASK=${1:?usage: point_grids.sh point_robot_sparse|point_treasure_sparse}
+case "$TASK" in
+  point_robot_sparse)
+    PARTS=("main_s12|hyperx varibad_rh varibad|1 2" "task_aware|task_aware|0 1 2" "hyperx_icml|hyperx_icml|0 1 2"
+           "rl2|rl2|0 1 2" "task_supervised|task_supervised|0 1 2") ;;
+  point_treasure_sparse)
+    PARTS=("main_s12|hyperx oracle_rh oracle|1 2" "ta_rs|task_aware oracle_rs|0 1 2" "varibad|varibad_rh varibad|0 1 2"
+           "rl2|rl2|0 1 2" "task_supervised|task_supervised|0 1 2") ;;
+  *) echo "point_grids.sh: unknown task $TASK" >&2; exit 2 ;;
+esac
+for part in "${PARTS[@]}"; do
+  IFS='|' read -r out agents seeds <<< "$part"
+  echo "### $(date -u +%FT%TZ) start $TASK $out: $agents, seeds $seeds, commit $(git rev-parse --short HEAD)"
+  EVAL_EVERY=1000000 PHYSICS_THREADS=1 AGENTS="$agents" SEEDS="$seeds" \
+    bash scripts/reproduce_catalogue.sh "$TASK" 2e7 "runs/$TASK/$out"
+  echo "### $(date -u +%FT%TZ) end $TASK $out rc=$?"
+done
