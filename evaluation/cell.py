@@ -39,7 +39,7 @@ from hyperstate.evaluation.deploy import (
 from hyperstate.evaluation.imports import import_modules, materialize_imports, read_import_sources  # noqa: F401
 from hyperstate.evaluation.provenance import cpu_description, versions  # noqa: F401
 from hyperstate.evaluation.upgrade import upgrade_record
-from hyperstate.files import save_array_atomic, write_json_atomic
+from hyperstate.files import append_json_line, read_json_lines, save_array_atomic, write_json_atomic
 
 
 @dataclasses.dataclass(frozen=True)
@@ -115,19 +115,11 @@ class PointLog:
     def record(self, frames: int, values: dict[str, dict[str, float]]) -> None:
         """Adds one iteration's values and appends them to the file."""
         self.add(values)
-        with self.path.open("a") as f:
-            f.write(json.dumps({"frames": frames, "values": values}) + "\n")
+        append_json_line(self.path, {"frames": frames, "values": values})
 
     def entries(self) -> list[dict]:
         """The iterations in the file; a line cut short by a crash ends it."""
-        entries = []
-        if self.path.exists():
-            for line in self.path.read_text().splitlines():
-                try:
-                    entries.append(json.loads(line))
-                except json.JSONDecodeError:
-                    break
-        return entries
+        return read_json_lines(self.path)
 
     def restore(self, after: int, before: int) -> None:
         """After a resume: takes back the iterations logged between frames `after` (the last point) and

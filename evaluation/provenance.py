@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-import json
 import platform
 import shlex
 import subprocess
 from datetime import datetime, timezone
 from importlib import metadata
 from pathlib import Path
+
+from hyperstate.files import append_json_line, read_json_lines
 
 
 def versions() -> dict:
@@ -47,7 +48,7 @@ def record_start(path: Path, command: list[str]) -> dict:
         "cpu": cpu_description(),
         "started": datetime.now(timezone.utc).isoformat(timespec="seconds"),
     }
-    _append_line(path, entry)
+    append_json_line(path, entry)
     return entry
 
 
@@ -55,20 +56,14 @@ def record_end(path: Path, entry: dict, wall_seconds: float, failed_cells: int) 
     """Appends the end of the invocation `entry` (from `record_start`) to `path`: the same command and start,
     the end time, the wall time and how many cells failed. A killed run leaves its start line only."""
     end = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    _append_line(path, {**entry, "ended": end, "wall_seconds": round(wall_seconds, 1), "failed_cells": failed_cells})
+    ended = {"ended": end, "wall_seconds": round(wall_seconds, 1), "failed_cells": failed_cells}
+    append_json_line(path, {**entry, **ended})
 
 
 def read_commands(path: Path) -> list[str]:
-    """The distinct command lines recorded in `path`, in order (none where it does not exist)."""
-    if not path.exists():
-        return []
-    commands = [json.loads(line)["command"] for line in path.read_text().splitlines() if line.strip()]
-    return list(dict.fromkeys(commands))
-
-
-def _append_line(path: Path, entry: dict) -> None:
-    with path.open("a") as f:
-        f.write(json.dumps(entry) + "\n")
+    """The distinct command lines recorded in `path`, in order (none where it does not exist; a line cut short
+    by a crash ends it)."""
+    return list(dict.fromkeys(entry["command"] for entry in read_json_lines(path)))
 
 
 def cpu_description() -> str:

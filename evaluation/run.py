@@ -346,10 +346,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{program_name()}: error: {e}", file=sys.stderr)
         return 2
     records, rows = report(args)
-    provenance.record_end(commands, invocation, time.perf_counter() - started, len(failures))
+    wall_seconds = time.perf_counter() - started
+    provenance.record_end(commands, invocation, wall_seconds, len(failures))
     print()
     print(text_table(rows))
-    print(f"\n{len(records)} cells in {time.perf_counter() - started:.0f} s; results in {args.out}/")
+    print(f"\n{len(records)} cells in {wall_seconds:.0f} s; results in {args.out}/")
     if failures:
         print(f"{program_name()}: {len(failures)} cell(s) failed:", *failures, sep="\n  ", file=sys.stderr)
         return 1

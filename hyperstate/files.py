@@ -50,6 +50,25 @@ def write_json_atomic(path: str | os.PathLike, data: Any) -> None:
     write_bytes_atomic(path, json.dumps(data, indent=1, default=_json_default).encode())
 
 
+def append_json_line(path: str | os.PathLike, data: Any) -> None:
+    """Appends `data` as one JSON line to `path` (a log that grows; a crash can cut only its last line)."""
+    with Path(path).open("a") as f:
+        f.write(json.dumps(data, default=_json_default) + "\n")
+
+
+def read_json_lines(path: str | os.PathLike) -> list[Any]:
+    """The entries of a JSON-lines log (`append_json_line`), none where it does not exist; a line cut short by
+    a crash ends it."""
+    entries = []
+    if Path(path).exists():
+        for line in Path(path).read_text().splitlines():
+            try:
+                entries.append(json.loads(line))
+            except json.JSONDecodeError:
+                break
+    return entries
+
+
 def save_array_atomic(path: str | os.PathLike, array: np.ndarray) -> None:
     """`array` as a .npy file, written atomically."""
     buffer = io.BytesIO()

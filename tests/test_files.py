@@ -6,6 +6,7 @@ import os
 import stat
 import threading
 
+import numpy as np
 import pytest
 
 from hyperstate.files import replacing, write_bytes_atomic
@@ -58,3 +59,15 @@ def test_agent_and_checkpoint_files_are_written_atomically(tmp_path, monkeypatch
         serialization.save({"w": torch.zeros(3)}, path, kind="agent")
     assert torch.equal(serialization.load(path, kind="agent")["w"], torch.ones(3))
     assert os.listdir(tmp_path) == ["agent.pt"]
+
+
+def test_json_lines_log_appends_and_stops_at_a_line_cut_short(tmp_path):
+    from hyperstate.files import append_json_line, read_json_lines
+
+    log = tmp_path / "log.jsonl"
+    assert read_json_lines(log) == []
+    append_json_line(log, {"frames": 1, "value": np.float32(0.5)})
+    append_json_line(log, {"frames": 2, "value": [1, 2]})
+    with log.open("a") as f:
+        f.write('{"frames": 3, "val')  # a crash mid-write
+    assert read_json_lines(log) == [{"frames": 1, "value": 0.5}, {"frames": 2, "value": [1, 2]}]
