@@ -238,9 +238,30 @@ def top_down(name: str) -> TopDownView | None:
 def reference_task(name: str) -> str | None:
     """The registered dense counterpart of task `name` (where its task-aware reference learns), or None."""
     reference = _lookup(name).reference_task
-    if reference is not None and reference not in _REGISTRY:
+    if reference is None:
+        return None
+    if reference not in _REGISTRY:
         raise ValueError(f"task {name!r} names reference_task {reference!r}, which is not registered")
+    # A reference trained over fewer MDP episodes never sees the later ones' observations (`inner_episode`)
+    # and is lost in them at deployment; one over other episode lengths learns other timing.
+    horizon, reference_horizon = _horizon(name), _horizon(reference)
+    if horizon != reference_horizon:
+        raise ValueError(
+            f"task {name!r} has {_describe_horizon(horizon)} but its reference_task {reference!r} has "
+            f"{_describe_horizon(reference_horizon)}: the task-aware reference must learn the same horizon"
+        )
     return reference
+
+
+def _horizon(name: str) -> tuple[int | None, int | None]:
+    """(MDP episodes per task, steps per MDP episode) of task `name`, None where its task does not say."""
+    task = load(name, seed=0).task
+    return getattr(task, "episodes_per_task", None), getattr(task, "episode_length", None)
+
+
+def _describe_horizon(horizon: tuple[int | None, int | None]) -> str:
+    episodes, length = horizon
+    return f"{episodes} MDP episode(s) of {length} steps per task"
 
 
 def task_prior(name: str, **kwargs: Any):

@@ -355,9 +355,18 @@ _register(
     num_goals=None,
     episode_length=EPISODE_LENGTH,
     episodes_per_task=SPARSE_EPISODES,
-    reference_task="point_robot",  # same observations and prior, dense reward
+    reference_task="point_robot_3ep",  # same observations, prior and horizon, dense reward
 )
 _register("point_robot", sparse=False, num_goals=None, episode_length=EPISODE_LENGTH, episodes_per_task=1)
+# The dense task over point_robot_sparse's horizon: the task-aware reference must see the later MDP
+# episodes (the `inner_episode` observation) in training, or it does not know what to do in them.
+_register(
+    "point_robot_3ep",
+    sparse=False,
+    num_goals=None,
+    episode_length=EPISODE_LENGTH,
+    episodes_per_task=SPARSE_EPISODES,
+)
 _register(
     "point_treasure_sparse",
     sparse=True,

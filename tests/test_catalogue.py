@@ -19,6 +19,7 @@ NEW_TASKS = {
     # name: small kwargs for fast tests (short MDP episodes, two of them so inner resets are exercised)
     "point_robot_sparse": {"episode_length": 20, "episodes_per_task": 2},
     "point_robot": {"episode_length": 20},
+    "point_robot_3ep": {"episode_length": 20, "episodes_per_task": 2},
     "point_treasure_sparse": {"episode_length": 20},
     "cheetah_vel_sparse": {"episode_length": 20, "episodes_per_task": 2},
     "cheetah_vel": {"episode_length": 20},

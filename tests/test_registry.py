@@ -124,7 +124,7 @@ def test_reference_tasks_are_dense_counterparts_with_the_same_interface():
     assert pairs == {
         "cheetah_dir_sparse": "cheetah_dir",
         "cheetah_vel_sparse": "cheetah_vel",
-        "point_robot_sparse": "point_robot",
+        "point_robot_sparse": "point_robot_3ep",
         "mountain_treasure_sparse": "mountain_treasure",
         "mountain_treasure_k8_sparse": "mountain_treasure_k8",
     }
@@ -132,6 +132,8 @@ def test_reference_tasks_are_dense_counterparts_with_the_same_interface():
         a, b = suite.load(sparse, seed=0, privileged=True), suite.load(dense, seed=0, privileged=True)
         assert a.observation_spec() == b.observation_spec() and a.action_spec() == b.action_spec()
         assert type(suite.task_prior(sparse)) is type(suite.task_prior(dense))
+        horizon = lambda env: (env.task.episodes_per_task, env.task.episode_length)  # noqa: E731
+        assert horizon(a) == horizon(b)
     with pytest.raises(ValueError, match="reference_task must be another task's name"):
         suite.register("self_reference", reference_task="self_reference")
     suite.register("dangling_reference", reference_task="no_such_task")(lambda seed=None: None)
@@ -140,6 +142,25 @@ def test_reference_tasks_are_dense_counterparts_with_the_same_interface():
             suite.reference_task("dangling_reference")
     finally:
         suite.unregister("dangling_reference")
+
+
+def test_a_reference_task_over_another_horizon_is_refused():
+    """The dense `point_robot` has 1 MDP episode per task: a task-aware reference trained there never sees
+    `inner_episode` 1 or 2 and is lost in the sparse task's later episodes, so it cannot be the reference."""
+    from hyperstate.suite import point_robot
+
+    def three_episodes(seed=None, **kwargs):
+        return suite.load("point_robot_sparse", seed=seed, **kwargs)
+
+    suite.register("three_episodes_one_episode_reference", reference_task="point_robot")(three_episodes)
+    try:
+        with pytest.raises(ValueError) as refused:
+            suite.reference_task("three_episodes_one_episode_reference")
+        message = str(refused.value)
+        assert f"has {point_robot.SPARSE_EPISODES} MDP episode(s) of {point_robot.EPISODE_LENGTH} steps" in message
+        assert f"'point_robot' has 1 MDP episode(s) of {point_robot.EPISODE_LENGTH} steps" in message
+    finally:
+        suite.unregister("three_episodes_one_episode_reference")
 
 
 def test_spawn_seeds_are_reproducible():
