@@ -210,7 +210,7 @@ def write_figure(path: Path, rows: list[dict], profiles: dict, title: str = "") 
 
     iqm = [r for r in rows if r["statistic"] == "iqm"]
     improvement = [r for r in rows if r["statistic"] == "probability_of_improvement"]
-    fig, (iqm_ax, profile_ax, poi_ax) = plt.subplots(1, 3, figsize=(15, 4.2))
+    fig, (iqm_ax, profile_ax, poi_ax) = plt.subplots(1, 3, figsize=(16.5, 4.2))
     colors = dict(zip(profiles["profiles"], plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, strict=False))
     for k, r in enumerate(iqm):
         iqm_ax.errorbar(r["value"], k, xerr=[[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]],
@@ -225,7 +225,7 @@ def write_figure(path: Path, rows: list[dict], profiles: dict, title: str = "") 
         profile_ax.fill_between(TAUS, low, high, color=colors[agent], alpha=0.15)
     profile_ax.set_xlabel("normalised score τ")
     profile_ax.set_ylabel("fraction of runs with score > τ")
-    profile_ax.legend(fontsize=8)
+    profile_ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)  # off the curves
     for k, r in enumerate(improvement):
         poi_ax.errorbar(r["value"], k, xerr=[[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]],
                         fmt="o", color="k", capsize=4)  # fmt: skip

@@ -225,9 +225,9 @@ def _curves_plot(records: list[dict], task: str, bracket_row: dict, figures: Pat
         if all("coverage" in p for r in cells for p in r["curve"][:length])
     }
     if covered:
-        fig, (ax, cov_ax) = plt.subplots(1, 2, figsize=(11, 4))
+        fig, (ax, cov_ax) = plt.subplots(1, 2, figsize=(13, 4))
     else:
-        fig, ax = plt.subplots(figsize=(6, 4))
+        fig, ax = plt.subplots(figsize=(8, 4))
     for agent, (cells, length) in by_agent.items():
         frames = np.array([p["frames"] for p in cells[0]["curve"][:length]])
         curves = np.array([[p["online_return"] for p in r["curve"][:length]] for r in cells])
@@ -244,7 +244,8 @@ def _curves_plot(records: list[dict], task: str, bracket_row: dict, figures: Pat
     ax.set_xlabel("frames")
     ax.set_ylabel("online return at deployment")
     ax.set_title(task)
-    ax.legend(fontsize=8)
+    # Beside the axes, not on them: with a grid's nine agents a legend inside covers the curves.
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.01, 1.0), borderaxespad=0.0)
     if covered:
         cov_ax.set_xlabel("frames")
         cov_ax.set_ylabel("hyper-state coverage (position × belief cells visited)")

@@ -939,7 +939,7 @@ def test_the_coverage_panel_is_drawn_only_for_a_task_that_measures_coverage(tmp_
         assert curves in written
         width, height = _png_size(curves)
         assert height == 400
-        assert width == (1100 if covered else 600)
+        assert width == (1300 if covered else 800)  # the legend beside the curves
         assert covered == (task == "cheetah_dir_sparse")
 
 
