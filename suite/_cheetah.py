@@ -176,7 +176,7 @@ class CheetahZoneBatch(MujocoBatch):
     def _transition(self, action: np.ndarray) -> np.ndarray:
         x_before = self._qpos[:, 0].copy()
         self._ctrl[:] = action
-        self._sim.step(nstep=N_SUB_STEPS)
+        self._step_physics(N_SUB_STEPS)
         x = self._qpos[:, 0]
         vx = (x - x_before) / CONTROL_TIMESTEP
         ctrl_cost = self.ctrl_cost_weight * np.sum(np.square(action), axis=1)

@@ -4,7 +4,8 @@ BAMDP horizon bookkeeping (MDP episode resets, BAMDP resets, final observations)
 A task's fast batch subclasses `MujocoBatch` and implements three hooks with NumPy over the copies:
 `_reset_mdp()` (physics of every copy to a new MDP episode start), `_transition(action)` (step the
 physics, return the (N,) rewards, update `self._belief` where the task has one) and
-`_mdp_observation()`. It must reproduce the task's dm_control environment exactly.
+`_mdp_observation()`. It must reproduce the task's dm_control environment exactly; `_transition` steps the
+physics with `_step_physics`, which raises dm_control's `PhysicsError` where the environment would.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from collections.abc import Sequence
 import mujoco
 import mujoco.batch
 import numpy as np
+from dm_control.rl.control import PhysicsError
 from dm_env import specs
 
 from hyperstate.suite._batch import BatchStep, check_batch_action
@@ -38,6 +40,7 @@ class MujocoBatch:
         self._qvel = self._sim.bind("qvel")
         self._ctrl = self._sim.bind("ctrl")
         self._time = self._sim.bind("time")
+        self._timestep = float(model.opt.timestep)
         low, high = model.actuator_ctrlrange.T
         self._action_spec = specs.BoundedArray((model.nu,), np.float64, low, high, name="action")
         prior_belief = first.prior_belief()
@@ -63,6 +66,22 @@ class MujocoBatch:
 
     def _load_extra_state(self, state: dict) -> None:
         pass
+
+    def _step_physics(self, nstep: int, **kwargs) -> None:
+        """Steps every copy's physics `nstep` substeps (`mujoco.batch.Batch.step` keyword arguments pass
+        through). Raises `PhysicsError`, as dm_control's `Physics.step` does, where a copy's state became
+        invalid (NaN, Inf or huge qpos, qvel or qacc): MuJoCo then resets that copy to its initial state
+        mid-step, which shows as a clock that did not advance by `nstep` substeps."""
+        timestep, clock = self._timestep, self._time.sum()
+        self._sim.step(nstep=nstep, **kwargs)
+        # Healthy copies all advance by nstep * timestep; one sum keeps the check off the step's time.
+        if abs(self._time.sum() - clock - self.num_envs * nstep * timestep) > 0.5 * timestep:
+            behind = np.flatnonzero(self._time < self._time.max() - 0.5 * timestep)  # all reset: none behind
+            copies = (behind if behind.size else np.arange(self.num_envs)).tolist()
+            raise PhysicsError(
+                f"physics state became invalid (NaN, Inf or huge qpos, qvel or qacc) in copies {copies}; "
+                "MuJoCo reset them mid-step"
+            )
 
     # BatchEnv ----------------------------------------------------------------------------------------
     def observation_spec(self) -> dict[str, specs.Array]:

@@ -222,7 +222,7 @@ class PointRobotBatch(MujocoBatch):
 
     def _transition(self, action: np.ndarray) -> np.ndarray:
         self._ctrl[:] = action
-        self._sim.step(nstep=N_SUB_STEPS)
+        self._step_physics(N_SUB_STEPS)
         position = self._qpos[:, :2].copy()
         reward = goal_reward(position, self._task, self.sparse, self.goal_radius)
         if self._belief is not None:

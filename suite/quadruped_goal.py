@@ -259,7 +259,7 @@ class QuadrupedGoalBatch(MujocoBatch):
 
     def _transition(self, action: np.ndarray) -> np.ndarray:
         self._ctrl[:] = action
-        self._sim.step(nstep=self._n_sub_steps, stage=mujoco.mjtStage.mjSTAGE_VEL)
+        self._step_physics(self._n_sub_steps, stage=mujoco.mjtStage.mjSTAGE_VEL)
         self._source = self._sim
         position = self._outputs[self._sim][0][:, self._torso, :2]
         return (_norms(position - self._task) <= self.goal_radius).astype(np.float64)

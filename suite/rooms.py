@@ -284,7 +284,7 @@ class RoomsBatch(MujocoBatch):
 
     def _transition(self, action: np.ndarray) -> np.ndarray:
         self._ctrl[:] = action
-        self._sim.step(nstep=N_SUB_STEPS)
+        self._step_physics(N_SUB_STEPS)
         code = cell_code(self._qpos[:, :2])
         reward, reached = stage_reward(code, self._goal_codes, self._reached)
         self._belief = belief_update(self._belief, self._support_codes, code, self._reached, reward)

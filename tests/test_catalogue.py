@@ -475,3 +475,24 @@ def test_point_tasks_top_down_view_draws_candidates_goal_and_each_episode(tmp_pa
     record = {"agent": "scripted", "task": "point_treasure_sparse", "seed": 0}
     path = report._top_down_plot(data, record, suite.top_down("point_treasure_sparse"), tmp_path / "b.png", plt)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.mark.parametrize("name", ["point_robot_sparse", "rooms_sparse", "cheetah_dir_sparse", "quadruped_goal_sparse"])
+def test_an_invalid_physics_state_raises_physics_error_in_the_batch_as_in_dm_control(name, tmp_path, monkeypatch):
+    """A NaN velocity makes MuJoCo reset the simulation mid-step. dm_control's environment raises
+    `PhysicsError` then; the fast batch must too, naming the copy, rather than carry on from the reset."""
+    from dm_control.rl.control import PhysicsError
+
+    monkeypatch.chdir(tmp_path)  # where MuJoCo writes its warning log, MUJOCO_LOG.TXT
+    env = suite.load(name, seed=0)
+    env.reset()
+    env.physics.data.qvel[0] = np.nan
+    with pytest.raises(PhysicsError):
+        env.step(np.zeros(action_size(name)))
+
+    batch = suite.batch(name, 3, seed=0, num_threads=1)
+    batch.reset()
+    batch.step(np.zeros((3, action_size(name))))  # healthy copies: no error
+    batch._qvel[1, 0] = np.nan
+    with pytest.raises(PhysicsError, match=r"in copies \[1\]; MuJoCo reset them mid-step"):
+        batch.step(np.zeros((3, action_size(name))))
