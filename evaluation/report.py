@@ -199,12 +199,14 @@ def write_figures(out: Path, records: list[dict]) -> list[Path]:
 
 
 def drawn_cells(cells: list[dict]) -> list[dict]:
-    """The cells of one agent × task whose behaviour is drawn: the lowest seed, the same figure whatever
-    seeds a grid adds, and the seed with the lowest online return where that is another, so that a
-    failing seed has its picture."""
+    """The cells of one agent × task whose behaviour is drawn, lowest seed first: the lowest seed, the same
+    figure whatever seeds a grid adds, and the seeds with the lowest and the highest online return where
+    those are others, so that a failing seed and the agent at its best both have their picture."""
     first = min(cells, key=lambda r: r["seed"])
     worst = min(cells, key=lambda r: (r["final"].get("online_return", np.inf), r["seed"]))
-    return [first] if worst is first else [first, worst]
+    best = min(cells, key=lambda r: (-r["final"].get("online_return", -np.inf), r["seed"]))
+    drawn = {id(r): r for r in (first, worst, best)}
+    return sorted(drawn.values(), key=lambda r: r["seed"])
 
 
 def _curves_plot(records: list[dict], task: str, bracket_row: dict, figures: Path, plt) -> Path | None:

@@ -66,13 +66,15 @@ def test_iqm_and_bootstrap_ci():
 
 
 # Deployment -----------------------------------------------------------------------------------------
-def test_behaviour_is_drawn_for_the_lowest_and_the_worst_seed():
+def test_behaviour_is_drawn_for_the_lowest_the_worst_and_the_best_seed():
     def cell(seed, online_return):
         return {"seed": seed, "final": {"online_return": online_return}}
 
-    cells = [cell(2, 5.0), cell(0, 3.0), cell(1, -7.0)]
-    assert [r["seed"] for r in report.drawn_cells(cells)] == [0, 1]
-    assert [r["seed"] for r in report.drawn_cells([cell(1, 4.0), cell(0, -1.0)])] == [0]
+    cells = [cell(2, 5.0), cell(0, 3.0), cell(1, -7.0), cell(3, 4.0)]
+    assert [r["seed"] for r in report.drawn_cells(cells)] == [0, 1, 2]
+    assert [r["seed"] for r in report.drawn_cells([cell(1, 4.0), cell(0, -1.0)])] == [0, 1]
+    assert [r["seed"] for r in report.drawn_cells([cell(1, -4.0), cell(0, 1.0)])] == [0, 1]
+    assert [r["seed"] for r in report.drawn_cells([cell(0, 2.0), cell(1, 2.0)])] == [0]  # ties: lowest seed
     assert [r["seed"] for r in report.drawn_cells([cell(3, 1.0), cell(1, 2.0), cell(2, 1.0)])] == [1, 2]
 
 
