@@ -253,3 +253,20 @@ def test_architecture_page_shows_the_drawn_diagram_of_modules_that_exist_and_the
                     parts = name.split(".")
                     layer = parts[1] if parts[0] == "hyperstate" and len(parts) > 1 else None
                     assert layer not in above, f"{path.relative_to(ROOT)} imports {name}"
+
+
+def test_readme_results_table_is_the_one_the_report_writes_from_the_committed_grids():
+    """The README's tasks × agents table is, character for character, what `hyperstate-report --table`
+    writes from the committed grids its command names, so a re-merged grid cannot leave it stale."""
+    from hyperstate.evaluation.cross_task import results_table
+
+    text = (ROOT / "README.md").read_text()
+    table = re.search(r"<!-- results-table -->\n(.*?)<!-- /results-table -->", text, re.S).group(1)
+    command = re.search(r"```bash\n(\.venv/bin/hyperstate-report .*?)```", text, re.S).group(1).replace("\\\n", " ")
+    args = command.split()[1:]
+    grids = [ROOT / a for a in args[: args.index("--out")]]
+    link = args[args.index("--table-link") + 1].strip('"')
+    assert grids and all((g / "summary.csv").exists() for g in grids), grids
+    assert table == results_table(grids, link=link, say=lambda _: None)
+    committed = ROOT / args[args.index("--table") + 1]
+    assert committed.read_text() == table
