@@ -270,3 +270,26 @@ def test_readme_results_table_is_the_one_the_report_writes_from_the_committed_gr
     assert table == results_table(grids, link=link, say=lambda _: None)
     committed = ROOT / args[args.index("--table") + 1]
     assert committed.read_text() == table
+
+
+def test_readme_cross_task_numbers_are_the_committed_reports():
+    """Every IQM and probability of improvement the README quotes (two decimals, with its interval where
+    given) is the committed cross-task CSV's, so that a re-run report cannot leave the prose stale."""
+    text = (ROOT / "README.md").read_text()
+    paragraph = re.search(r"The same command writes the cross-task report.*?\n\n", text, re.S).group(0)
+    paragraph = " ".join(paragraph.split())
+    with open(ROOT / "docs" / "results" / "cross_task" / "cross_task.csv") as f:
+        rows = {(r["statistic"], r["agent"]): r for r in csv.DictReader(f)}
+    number = r"(-?\d\.\d\d)(?: \((-?\d\.\d\d)–(-?\d\.\d\d)\))?"
+    quoted = []
+    for first, second, *values in re.findall(rf"P\(`(\w+)` > `(\w+)`\) {number}", paragraph):
+        quoted.append((("probability_of_improvement", f"{first}>{second}"), values))
+    without_pairs = re.sub(rf"P\(`\w+` > `\w+`\) {number}", "", paragraph)
+    for names, *values in re.findall(rf"((?:`\w+`(?: and |, )?)+) {number}", without_pairs):
+        quoted += [(("iqm", name), values) for name in re.findall(r"`(\w+)`", names)]
+    assert len(quoted) >= 8, quoted
+    for key, (value, low, high) in quoted:
+        row = rows[key]
+        for text_value, column in ((value, "value"), (low, "ci_low"), (high, "ci_high")):
+            if text_value:
+                assert abs(float(text_value) - float(row[column])) <= 0.005 + 1e-9, (key, column, text_value)
