@@ -47,7 +47,7 @@ zoo: $(STAMP)
 test: $(STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m pytest -q
-	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --quiet --site-dir build/site
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir build/site  # not --quiet: it hides the warnings strict fails on
 
 bench: $(STAMP)
 	$(PY) bench/suite_speed.py
