@@ -13,9 +13,10 @@ each task), the report gives:
 - the IQM of the normalised score per agent, with 95 % CIs;
 - performance profiles: the fraction of runs whose normalised score exceeds τ, with 95 % CIs;
 - the probability of improvement of one agent over another (`--pairs X:Y`: P(X > Y)), with 95 % CIs.
-An agent is scored on the tasks that have it; per task on its first k seeds, k the fewest seeds it has
-on any of them (a bootstrap over tasks needs as many runs per task). Agents missing from a task are left
-out of the aggregate, with a message.
+An agent is scored on the tasks that have it (a belief oracle only where the task has an exact belief),
+with a message where those are not all; per task on its first k seeds, k the fewest seeds it has on any
+of them (a bootstrap over tasks needs as many runs per task). A probability of improvement compares two
+agents on the tasks both have. A row over fewer than all the tasks names its tasks (`task`, joined by +).
 Writes OUT/cross_task.csv (one row per statistic: `normaliser` per task with its `low` and `high`
 returns, `iqm` per agent and `probability_of_improvement` per pair with `value`, `ci_low`, `ci_high` and
 the `runs` behind them; the profiles are in the figure) and OUT/cross_task.png. `--table FILE` also
@@ -136,29 +137,54 @@ def normalisers(table, low_agent: str, high_agent: str, say=print) -> dict[str, 
 
 
 def score_matrices(table, scales, agents: list[str] | None, say=print) -> dict[str, np.ndarray]:
-    """{agent: (runs, tasks) normalised scores} over the normalised tasks, in the order of `scales`."""
+    """{agent: (runs, tasks) normalised scores} over the normalised tasks that have the agent, in the order
+    of `scales`; `agent_tasks` gives which. An agent missing from some tasks (a belief oracle on a task
+    without an exact belief) is scored on the others, with a message."""
     tasks = list(scales)
     candidates = agents or sorted({a for t in tasks for a in table[t]})
     matrices = {}
     for agent in candidates:
-        lacking = [t for t in tasks if agent not in table[t]]
-        if lacking:
-            say(f"cross-task report: {agent} left out: no cell on {', '.join(lacking)}")
+        present = [t for t in tasks if agent in table[t]]
+        if not present:
+            say(f"cross-task report: {agent} left out: no cell on {', '.join(tasks)}")
             continue
-        runs = min(len(table[t][agent]) for t in tasks)
+        if len(present) < len(tasks):
+            lacking = [t for t in tasks if t not in present]
+            scored = f"{len(present)} of {len(tasks)} tasks"
+            say(f"cross-task report: {agent} scored on {scored}: no cell on {', '.join(lacking)}")
+        runs = min(len(table[t][agent]) for t in present)
         columns = []
-        for t in tasks:
+        for t in present:
             low, high = scales[t]
             seeds = sorted(table[t][agent])[:runs]
             columns.append([(table[t][agent][s] - low) / (high - low) for s in seeds])
         matrices[agent] = np.array(columns).T
     if not matrices:
-        raise ReportError("no agent has a cell on every normalised task")
+        raise ReportError("no agent has a cell on a normalised task")
     return matrices
 
 
-def interval_estimates(matrices, pairs: list[tuple[str, str]], reps: int, seed: int) -> tuple[list[dict], dict]:
-    """The CSV's `iqm` and `probability_of_improvement` rows, and the performance profiles."""
+def agent_tasks(table, scales) -> dict[str, list[str]]:
+    """{agent: the normalised tasks whose grid has it}, in the order of `scales` (score_matrices' columns)."""
+    agents = {a for t in scales for a in table[t]}
+    return {a: [t for t in scales if a in table[t]] for a in sorted(agents)}
+
+
+def paired(matrices, tasks_of, x: str, y: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """X's and Y's scores on the tasks both have, on as many seeds each (a paired bootstrap needs both)."""
+    common = [t for t in tasks_of[x] if t in tasks_of[y]]
+    a = matrices[x][:, [tasks_of[x].index(t) for t in common]]
+    b = matrices[y][:, [tasks_of[y].index(t) for t in common]]
+    runs = min(len(a), len(b))
+    return a[:runs], b[:runs], common
+
+
+def interval_estimates(
+    matrices, pairs: list[tuple[str, str]], reps: int, seed: int, tasks_of: dict[str, list[str]] | None = None
+) -> tuple[list[dict], dict]:
+    """The CSV's `iqm` and `probability_of_improvement` rows, and the performance profiles. `tasks_of` names
+    each agent's columns (default: the same tasks for every agent); a row's `task` lists the tasks behind
+    it where they are not all of them."""
     import warnings
 
     # rliable's bootstraps (arch's) draw from NumPy's global generator; a RandomState handed to them is not
@@ -167,14 +193,21 @@ def interval_estimates(matrices, pairs: list[tuple[str, str]], reps: int, seed: 
     try:
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message="random_state is deprecated", category=FutureWarning)
-            return _interval_estimates(matrices, pairs, reps, seed)
+            return _interval_estimates(matrices, pairs, reps, seed, tasks_of)
     finally:
         np.random.set_state(saved)
 
 
-def _interval_estimates(matrices, pairs, reps, seed):
+def _interval_estimates(matrices, pairs, reps, seed, tasks_of):
     from rliable import library as rly
     from rliable import metrics
+
+    if tasks_of is None:
+        tasks_of = {a: [str(k) for k in range(m.shape[1])] for a, m in matrices.items()}
+    every = {t for tasks in tasks_of.values() for t in tasks}
+
+    def subset(tasks: list[str]) -> str:
+        return "" if set(tasks) == every else "+".join(tasks)
 
     def iqm(scores):
         return np.array([metrics.aggregate_iqm(scores)])
@@ -182,17 +215,19 @@ def _interval_estimates(matrices, pairs, reps, seed):
     np.random.seed(seed)
     point, ci = rly.get_interval_estimates(matrices, iqm, reps=reps)
     rows = [
-        {"statistic": "iqm", "agent": a, "value": point[a][0], "ci_low": ci[a][0, 0], "ci_high": ci[a][1, 0],
-         "runs": matrices[a].size}
+        {"statistic": "iqm", "agent": a, "task": subset(tasks_of[a]), "value": point[a][0], "ci_low": ci[a][0, 0],
+         "ci_high": ci[a][1, 0], "runs": matrices[a].size}
         for a in matrices
     ]  # fmt: skip
-    present = [(x, y) for x, y in pairs if x in matrices and y in matrices]
+    present = {f"{x}>{y}": paired(matrices, tasks_of, x, y) for x, y in pairs if x in matrices and y in matrices}
+    present = {k: v for k, v in present.items() if v[2]}  # two agents without a common task: no comparison
     if present:
-        pair_scores = {f"{x}>{y}": (matrices[x], matrices[y]) for x, y in present}
+        pair_scores = {k: (a, b) for k, (a, b, _) in present.items()}
         np.random.seed(seed)
         point, ci = rly.get_interval_estimates(pair_scores, metrics.probability_of_improvement, reps=reps)
         rows += [
-            {"statistic": "probability_of_improvement", "agent": k, "value": float(np.squeeze(point[k])),
+            {"statistic": "probability_of_improvement", "agent": k, "task": subset(present[k][2]),
+             "value": float(np.squeeze(point[k])),
              "ci_low": float(np.squeeze(ci[k][0])), "ci_high": float(np.squeeze(ci[k][1])),
              "runs": pair_scores[k][0].size + pair_scores[k][1].size}
             for k in pair_scores
@@ -215,7 +250,8 @@ def write_figure(path: Path, rows: list[dict], profiles: dict, title: str = "") 
     for k, r in enumerate(iqm):
         iqm_ax.errorbar(r["value"], k, xerr=[[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]],
                         fmt="o", color=colors[r["agent"]], capsize=4)  # fmt: skip
-    iqm_ax.set_yticks(range(len(iqm)), [r["agent"] for r in iqm])
+    # An agent scored on fewer tasks than the others says on how many.
+    iqm_ax.set_yticks(range(len(iqm)), [_label(r) for r in iqm])
     iqm_ax.axvline(0, color="0.6", linewidth=1)
     iqm_ax.axvline(1, color="0.6", linewidth=1, linestyle="--")
     iqm_ax.set_xlabel("IQM of the normalised score (95 % CI)")
@@ -229,7 +265,7 @@ def write_figure(path: Path, rows: list[dict], profiles: dict, title: str = "") 
     for k, r in enumerate(improvement):
         poi_ax.errorbar(r["value"], k, xerr=[[r["value"] - r["ci_low"]], [r["ci_high"] - r["value"]]],
                         fmt="o", color="k", capsize=4)  # fmt: skip
-    poi_ax.set_yticks(range(len(improvement)), [r["agent"].replace(">", " > ") for r in improvement])
+    poi_ax.set_yticks(range(len(improvement)), [_label(r).replace(">", " > ") for r in improvement])
     poi_ax.axvline(0.5, color="0.6", linewidth=1, linestyle="--")
     poi_ax.set_xlim(0, 1)
     poi_ax.set_ylim(-0.5, len(improvement) - 0.5)
@@ -239,6 +275,11 @@ def write_figure(path: Path, rows: list[dict], profiles: dict, title: str = "") 
     fig.savefig(path, dpi=100)
     plt.close(fig)
     return path
+
+
+def _label(row: dict) -> str:
+    tasks = row.get("task") or ""
+    return f"{row['agent']} ({tasks.count('+') + 1} tasks)" if tasks else row["agent"]
 
 
 def report(
@@ -266,7 +307,7 @@ def report(
         {"statistic": "normaliser", "agent": f"{low_agent}..{high_agent}", "task": t, "low": low, "high": high}
         for t, (low, high) in scales.items()
     ]  # fmt: skip
-    estimated, profiles = interval_estimates(matrices, pairs, reps, seed)
+    estimated, profiles = interval_estimates(matrices, pairs, reps, seed, agent_tasks(table, scales))
     rows += estimated
     out.mkdir(parents=True, exist_ok=True)
     with (out / CSV_NAME).open("w", newline="") as f:

@@ -95,11 +95,21 @@ def test_what_cannot_be_compared_is_left_out_with_a_reason(tmp_path):
     rows = cross_task.report([grid, rival], tmp_path / "out", reps=100, say=messages.append)
     text = "\n".join(messages)
     assert "task_c left out: task_aware (1.0) does not beat varibad (5.0)" in text
-    assert "oracle left out: no cell on task_b" in text
+    assert "oracle scored on 1 of 2 tasks: no cell on task_b" in text
     assert "rival: left out hyperx (another configuration than in an earlier grid)" in text
-    iqm = {r["agent"] for r in rows if r["statistic"] == "iqm"}
-    assert iqm == {"hyperx", "oracle_rh", "task_aware", "varibad"}
-    assert [r["agent"] for r in rows if r["statistic"] == "probability_of_improvement"] == ["hyperx>varibad"]
+    iqm = {r["agent"]: r for r in rows if r["statistic"] == "iqm"}
+    assert set(iqm) == {"hyperx", "oracle", "oracle_rh", "task_aware", "varibad"}
+    assert [r["task"] for a, r in sorted(iqm.items())] == ["", "task_a", "", "", ""]  # only oracle's is a subset
+    # oracle, on task_a only: its IQM is over its task_a seeds, and P(oracle_rh > oracle) compares the two
+    # on task_a alone, while hyperx > varibad is over both tasks.
+    assert iqm["oracle"]["value"] == pytest.approx(stats.trim_mean(normalised("task_a", "oracle"), 0.25))
+    assert iqm["oracle"]["runs"] == 3 and iqm["hyperx"]["runs"] == 6
+    pairs = {r["agent"]: r for r in rows if r["statistic"] == "probability_of_improvement"}
+    assert set(pairs) == {"hyperx>varibad", "oracle_rh>oracle"}
+    a, b = normalised("task_a", "oracle_rh"), normalised("task_a", "oracle")
+    beats = np.mean([(u > v) + 0.5 * (u == v) for u in a for v in b])
+    assert pairs["oracle_rh>oracle"]["value"] == pytest.approx(beats)
+    assert pairs["oracle_rh>oracle"]["task"] == "task_a" and pairs["hyperx>varibad"]["task"] == ""
 
 
 def test_the_command_names_bad_input_in_one_line(tmp_path):
