@@ -279,7 +279,8 @@ def write_figure(path: Path, rows: list[dict], profiles: dict, title: str = "") 
 
 def _label(row: dict) -> str:
     tasks = row.get("task") or ""
-    return f"{row['agent']} ({tasks.count('+') + 1} tasks)" if tasks else row["agent"]
+    count = tasks.count("+") + 1
+    return f"{row['agent']} ({count} task{'s' if count > 1 else ''})" if tasks else row["agent"]
 
 
 def report(
