@@ -11,13 +11,14 @@
 set -u
 cd "$(dirname "$0")/../.."
 TASK=${1:?usage: point_grids.sh point_robot_sparse|point_treasure_sparse}
+# The parts not yet in docs/results/<task>/ (the merged ones: point_robot_sparse main_s12, task_aware and
+# hyperx_icml seed 0; point_treasure_sparse main_s12, ta_rs and varibad_rh). A worktree that still holds
+# the lanes' runs resumes them with its own lane scripts instead; a fresh one runs these.
 case "$TASK" in
   point_robot_sparse)
-    PARTS=("main_s12|hyperx varibad_rh varibad|1 2" "task_aware|task_aware|0 1 2" "hyperx_icml|hyperx_icml|0 1 2"
-           "rl2|rl2|0 1 2" "task_supervised|task_supervised|0 1 2") ;;
+    PARTS=("hyperx_icml_s12|hyperx_icml|1 2" "rl2|rl2|0 1 2" "task_supervised|task_supervised|0 1 2") ;;
   point_treasure_sparse)
-    PARTS=("main_s12|hyperx oracle_rh oracle|1 2" "ta_rs|task_aware oracle_rs|0 1 2" "varibad|varibad_rh varibad|0 1 2"
-           "rl2|rl2|0 1 2" "task_supervised|task_supervised|0 1 2") ;;
+    PARTS=("varibad_only|varibad|0 1 2" "rl2|rl2|0 1 2" "task_supervised|task_supervised|0 1 2") ;;
   *) echo "point_grids.sh: unknown task $TASK" >&2; exit 2 ;;
 esac
 for part in "${PARTS[@]}"; do
