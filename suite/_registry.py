@@ -145,9 +145,10 @@ def register(
     ((T, M, ...) observations each step ended in, (T, M) rewards, (M, P) true tasks).
     `position_keys`, if given, names the observations that say where the agent is (what state-based
     exploration bonuses look at by default, e.g. `("x_displacement",)`).
-    `reference_task`, if given, names a registered task with the same observations, actions and task
-    prior but a dense reward (e.g. `cheetah_dir` for `cheetah_dir_sparse`): the task-aware reference
-    policy learns it there and is deployed on this task (evaluation/run.py).
+    `reference_task`, if given, names a registered task with the same observations, actions, task prior
+    and horizon (MDP episodes per task, steps per episode) but a dense reward (e.g. `cheetah_dir` for
+    `cheetah_dir_sparse`): the task-aware reference policy learns it there and is deployed on this task
+    (evaluation/run.py).
     `position_axis` (a `PositionAxis`), if given, is the one-number position the harness plots the agent
     along; `coverage` (a `Coverage`), if given, the hyper-state grid whose visited fraction the grid logs;
     `bayes_estimate`, if given, maps the task-aware reference's returns per deployment to an estimate of
@@ -236,7 +237,8 @@ def top_down(name: str) -> TopDownView | None:
 
 
 def reference_task(name: str) -> str | None:
-    """The registered dense counterpart of task `name` (where its task-aware reference learns), or None."""
+    """The registered dense counterpart of task `name` (where its task-aware reference learns), or None.
+    Raises ValueError where it is not registered or has another horizon than `name`."""
     reference = _lookup(name).reference_task
     if reference is None:
         return None
