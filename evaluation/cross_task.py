@@ -120,6 +120,42 @@ def results_table(grids: list[Path], agents: list[str] | None = None, link: str 
     return "\n".join(lines) + "\n"
 
 
+def task_table(grid: Path, metrics: list[str], decimals: int = 1, say=print) -> str:
+    """A Markdown table of one task's grid, an agent per row (the highest mean first, `task_aware` last):
+    the online return of each seed (— for a seed it lacks), their mean, the seeds that meet the task's
+    success criterion (`solved k of n`, where the task declares one) and the mean over seeds of each named
+    final-deployment metric. The results pages' tables are these (tests/test_docs.py)."""
+    from hyperstate import suite
+
+    cells = finished_cells([grid], say)
+    if len(cells) != 1:
+        raise ReportError(f"{grid}: a task table is of one task's grid, found tasks {sorted(cells)}")
+    ((task, agents),) = cells.items()
+    success = suite.success(task)
+    seeds = sorted({s for per_agent in agents.values() for s in per_agent})
+    header = ["agent", f"online return, seeds {' / '.join(str(s) for s in seeds)}", "mean"]
+    header += ["solved"] if success else []
+    header += [f"`{m}`" for m in metrics]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+
+    def mean_return(agent: str) -> float:
+        return float(np.mean([f["online_return"] for f in agents[agent].values()]))
+
+    order = sorted((a for a in agents if a != "task_aware"), key=lambda a: (-mean_return(a), a))
+    for agent in [*order, *(["task_aware"] if "task_aware" in agents else [])]:
+        finals = [agents[agent][s] for s in sorted(agents[agent])]
+        by_seed = [agents[agent].get(s) for s in seeds]  # a seed the agent lacks (not finished): —
+        row = [f"`{agent}`", " / ".join("—" if f is None else f"{f['online_return']:,.{decimals}f}" for f in by_seed),
+               f"{mean_return(agent):,.{decimals}f}"]  # fmt: skip
+        if success:
+            row.append(f"{sum(bool(success(f)) for f in finals)} of {len(finals)}")
+        for m in metrics:
+            values = [f[m] for f in finals if f.get(m) is not None]
+            row.append(f"{np.mean(values):.2f}" if values else "—")
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
 def normalisers(table, low_agent: str, high_agent: str, say=print) -> dict[str, tuple[float, float]]:
     """Per task, (low, high): the mean returns of the two normalising agents; tasks without them skipped."""
     out = {}

@@ -293,3 +293,25 @@ def test_readme_cross_task_numbers_are_the_committed_reports():
         for text_value, column in ((value, "value"), (low, "ci_low"), (high, "ci_high")):
             if text_value:
                 assert abs(float(text_value) - float(row[column])) <= 0.005 + 1e-9, (key, column, text_value)
+
+
+RESULTS_PAGES = sorted((ROOT / "docs" / "results").glob("*.md"))
+TASK_TABLE = re.compile(r"<!-- task-table: (?P<args>[^>]*?) -->\n\n(?P<table>.*?)\n<!-- /task-table -->", re.S)
+
+
+@pytest.mark.parametrize("page", RESULTS_PAGES, ids=lambda p: p.name)
+def test_results_pages_tables_are_what_page_table_prints_from_their_grids(page):
+    """A results page's per-agent table (between `<!-- task-table: GRID METRIC ... -->` markers) is exactly
+    what research/catalogue/page_table.py prints from the committed grid, so no number in it is typed by
+    hand or left stale by a re-merge."""
+    from hyperstate.evaluation.cross_task import task_table
+
+    for match in TASK_TABLE.finditer(page.read_text()):
+        grid, *metrics = match.group("args").split()
+        assert (ROOT / grid / "cells").is_dir(), grid
+        assert match.group("table") == task_table(ROOT / grid, metrics, say=lambda _: None), (page.name, grid)
+
+
+def test_the_point_pages_hold_task_tables():
+    marked = [p.name for p in RESULTS_PAGES if TASK_TABLE.search(p.read_text())]
+    assert {"point_treasure_sparse.md", "point_robot_sparse.md"} <= set(marked)
