@@ -4,8 +4,8 @@ mean, the seeds that solve the task and the means of the named final-deployment 
     .venv/bin/python research/catalogue/page_table.py docs/results/point_treasure_sparse \
         goal_reached last_episode_at_goal
 
-A page holds the table between `<!-- task-table: GRID METRIC ... -->` and `<!-- /task-table -->`;
-tests/test_docs.py checks that it is what this prints.
+A page holds the table between `<!-- task-table: GRID METRIC ... [--decimals=N] -->` and
+`<!-- /task-table -->`, blank lines around it; tests/test_docs.py checks that it is what this prints.
 """
 
 from __future__ import annotations
