@@ -172,13 +172,15 @@ def normalisers(table, low_agent: str, high_agent: str, say=print) -> dict[str, 
     return out
 
 
-def score_matrices(table, scales, agents: list[str] | None, say=print) -> dict[str, np.ndarray]:
+def score_matrices(
+    table, scales, agents: list[str] | None, say=print
+) -> tuple[dict[str, np.ndarray], dict[str, list[str]]]:
     """{agent: (runs, tasks) normalised scores} over the normalised tasks that have the agent, in the order
-    of `scales`; `agent_tasks` gives which. An agent missing from some tasks (a belief oracle on a task
-    without an exact belief) is scored on the others, with a message."""
+    of `scales`, and {agent: those tasks} (the matrix's columns). An agent missing from some tasks (a belief
+    oracle on a task without an exact belief) is scored on the others, with a message."""
     tasks = list(scales)
     candidates = agents or sorted({a for t in tasks for a in table[t]})
-    matrices = {}
+    matrices, tasks_of = {}, {}
     for agent in candidates:
         present = [t for t in tasks if agent in table[t]]
         if not present:
@@ -194,16 +196,10 @@ def score_matrices(table, scales, agents: list[str] | None, say=print) -> dict[s
             low, high = scales[t]
             seeds = sorted(table[t][agent])[:runs]
             columns.append([(table[t][agent][s] - low) / (high - low) for s in seeds])
-        matrices[agent] = np.array(columns).T
+        matrices[agent], tasks_of[agent] = np.array(columns).T, present
     if not matrices:
         raise ReportError("no agent has a cell on a normalised task")
-    return matrices
-
-
-def agent_tasks(table, scales) -> dict[str, list[str]]:
-    """{agent: the normalised tasks whose grid has it}, in the order of `scales` (score_matrices' columns)."""
-    agents = {a for t in scales for a in table[t]}
-    return {a: [t for t in scales if a in table[t]] for a in sorted(agents)}
+    return matrices, tasks_of
 
 
 def paired(matrices, tasks_of, x: str, y: str) -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -216,11 +212,11 @@ def paired(matrices, tasks_of, x: str, y: str) -> tuple[np.ndarray, np.ndarray, 
 
 
 def interval_estimates(
-    matrices, pairs: list[tuple[str, str]], reps: int, seed: int, tasks_of: dict[str, list[str]] | None = None
+    matrices, tasks_of: dict[str, list[str]], pairs: list[tuple[str, str]], reps: int, seed: int
 ) -> tuple[list[dict], dict]:
     """The CSV's `iqm` and `probability_of_improvement` rows, and the performance profiles. `tasks_of` names
-    each agent's columns (default: the same tasks for every agent); a row's `task` lists the tasks behind
-    it where they are not all of them."""
+    each agent's columns (`score_matrices`); a row's `task` lists the tasks behind it where they are not all
+    of them."""
     import warnings
 
     # rliable's bootstraps (arch's) draw from NumPy's global generator; a RandomState handed to them is not
@@ -229,17 +225,15 @@ def interval_estimates(
     try:
         with warnings.catch_warnings():
             warnings.filterwarnings("ignore", message="random_state is deprecated", category=FutureWarning)
-            return _interval_estimates(matrices, pairs, reps, seed, tasks_of)
+            return _interval_estimates(matrices, tasks_of, pairs, reps, seed)
     finally:
         np.random.set_state(saved)
 
 
-def _interval_estimates(matrices, pairs, reps, seed, tasks_of):
+def _interval_estimates(matrices, tasks_of, pairs, reps, seed):
     from rliable import library as rly
     from rliable import metrics
 
-    if tasks_of is None:
-        tasks_of = {a: [str(k) for k in range(m.shape[1])] for a, m in matrices.items()}
     every = {t for tasks in tasks_of.values() for t in tasks}
 
     def subset(tasks: list[str]) -> str:
@@ -338,13 +332,13 @@ def report(
         raise ReportError(
             f"no task has both {low_agent} and {high_agent} with {high_agent} ahead: nothing to normalise"
         )
-    matrices = score_matrices(table, scales, agents, say)
+    matrices, tasks_of = score_matrices(table, scales, agents, say)
     pairs = [tuple(p.split(":")) for p in DEFAULT_PAIRS] if pairs is None else pairs
     rows = [
         {"statistic": "normaliser", "agent": f"{low_agent}..{high_agent}", "task": t, "low": low, "high": high}
         for t, (low, high) in scales.items()
     ]  # fmt: skip
-    estimated, profiles = interval_estimates(matrices, pairs, reps, seed, agent_tasks(table, scales))
+    estimated, profiles = interval_estimates(matrices, tasks_of, pairs, reps, seed)
     rows += estimated
     out.mkdir(parents=True, exist_ok=True)
     with (out / CSV_NAME).open("w", newline="") as f:
