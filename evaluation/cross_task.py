@@ -84,11 +84,21 @@ def returns_by_task(grids: list[Path], say=print) -> dict[str, dict[str, dict[in
     }
 
 
+def _success_criterion(task: str):
+    """The task's success criterion (`suite.success`), None where it has none or is not registered in this
+    process (its table then gives returns only)."""
+    from hyperstate import suite
+
+    try:
+        return suite.success(task)
+    except ValueError:
+        return None
+
+
 def results_table(grids: list[Path], agents: list[str] | None = None, link: str | None = None, say=print) -> str:
     """A Markdown table, tasks × agents: each agent's mean online return at deployment over its seeds and,
     for tasks that declare a success criterion (`suite.register(..., success=)`), the seeds that meet it
     (`solved k/n`). `link` (e.g. "docs/results/{task}.md") makes each task name a link."""
-    from hyperstate import suite
     from hyperstate.agents import GRID_PRESETS
 
     cells = finished_cells(grids, say)
@@ -102,10 +112,7 @@ def results_table(grids: list[Path], agents: list[str] | None = None, link: str 
         "|---|" + "---|" * len(order),
     ]
     for task in sorted(cells):
-        try:
-            success = suite.success(task)
-        except ValueError:  # a task not registered in this process: returns only
-            success = None
+        success = _success_criterion(task)
         entries = []
         for agent in order:
             finals = list(cells[task].get(agent, {}).values())
@@ -125,13 +132,12 @@ def task_table(grid: Path, metrics: list[str], decimals: int = 1, say=print) -> 
     the online return of each seed (— for a seed it lacks), their mean, the seeds that meet the task's
     success criterion (`solved k of n`, where the task declares one) and the mean over seeds of each named
     final-deployment metric. The results pages' tables are these (tests/test_docs.py)."""
-    from hyperstate import suite
 
     cells = finished_cells([grid], say)
     if len(cells) != 1:
         raise ReportError(f"{grid}: a task table is of one task's grid, found tasks {sorted(cells)}")
     ((task, agents),) = cells.items()
-    success = suite.success(task)
+    success = _success_criterion(task)
     seeds = sorted({s for per_agent in agents.values() for s in per_agent})
     header = ["agent", f"online return, seeds {' / '.join(str(s) for s in seeds)}", "mean"]
     header += ["solved"] if success else []
