@@ -127,11 +127,13 @@ def results_table(grids: list[Path], agents: list[str] | None = None, link: str 
     return "\n".join(lines) + "\n"
 
 
-def task_table(grid: Path, metrics: list[str], decimals: int = 1, say=print) -> str:
+def task_table(grid: Path, metrics: list[str], decimals: int = 1, share: bool = False, say=print) -> str:
     """A Markdown table of one task's grid, an agent per row (the highest mean first, `task_aware` last):
     the online return of each seed (— for a seed it lacks), their mean, the seeds that meet the task's
-    success criterion (`solved k of n`, where the task declares one) and the mean over seeds of each named
-    final-deployment metric. The results pages' tables are these (tests/test_docs.py)."""
+    success criterion (`solved k of n`, where the task declares one; with `share`, also their share and its
+    Wilson 95 % interval, as in `summary.csv`) and the mean over seeds of each named final-deployment
+    metric. The results pages' tables are these (tests/test_docs.py)."""
+    from hyperstate.evaluation.report import success_share
 
     cells = finished_cells([grid], say)
     if len(cells) != 1:
@@ -141,6 +143,7 @@ def task_table(grid: Path, metrics: list[str], decimals: int = 1, say=print) -> 
     seeds = sorted({s for per_agent in agents.values() for s in per_agent})
     header = ["agent", f"online return, seeds {' / '.join(str(s) for s in seeds)}", "mean"]
     header += ["solved"] if success else []
+    header += ["share (Wilson 95 %)"] if success and share else []
     header += [f"`{m}`" for m in metrics]
     lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
 
@@ -155,6 +158,9 @@ def task_table(grid: Path, metrics: list[str], decimals: int = 1, say=print) -> 
                f"{mean_return(agent):,.{decimals}f}"]  # fmt: skip
         if success:
             row.append(f"{sum(bool(success(f)) for f in finals)} of {len(finals)}")
+            if share:
+                s = success_share([{"final": f} for f in finals], success)
+                row.append(f"{s['success_share']:.2f} ({s['success_ci95_low']:.2f}–{s['success_ci95_high']:.2f})")
         for m in metrics:
             values = [f[m] for f in finals if f.get(m) is not None]
             row.append(f"{np.mean(values):.2f}" if values else "—")

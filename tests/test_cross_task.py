@@ -161,3 +161,34 @@ def test_the_results_table_gives_each_agents_mean_and_the_seeds_that_meet_the_ta
     assert rows["[`cheetah_dir_sparse`](results/cheetah_dir_sparse.md)"] == ["—", "710 (solved 2/3)", "—", "—", "—"]
     expected = [f"{np.mean(RETURNS['task_a'][a]):,.0f}" for a in ("oracle", "oracle_rh", "varibad", "hyperx")]
     assert rows["[`task_a`](results/task_a.md)"] == [*expected, "100"]
+
+
+def test_the_task_table_gives_seeds_mean_solved_share_and_metric_means(tmp_path):
+    """A results page's table: per agent each seed's return (— for a missing seed), the mean, the seeds
+    that meet the task's criterion, with `share` their Wilson 95 % interval (scipy's, as in summary.csv),
+    and the seeds' mean of each named metric; `task_aware` last whatever its mean."""
+    finals = {
+        "oracle_rh": [{"online_return": 900.0, "correct_direction": 1.0, "return_wrong_first": 300.0, "stuck": 0.0},
+                      {"online_return": 430.0, "correct_direction": 0.5, "return_wrong_first": -20.0, "stuck": 0.5},
+                      {"online_return": 800.0, "correct_direction": 0.95, "stuck": 0.1}],
+        "oracle": [{"online_return": -2.0, "correct_direction": 0.0, "stuck": 0.0},
+                   {"online_return": -4.0, "correct_direction": 0.0}],
+        "task_aware": [{"online_return": 1.0, "correct_direction": 1.0, "stuck": 0.0}],
+    }  # fmt: skip
+    for agent, per_seed in finals.items():
+        for seed, final in enumerate(per_seed):
+            cell = tmp_path / "cells" / f"{agent}__cheetah_dir_sparse__s{seed}"
+            cell.mkdir(parents=True)
+            record = {"agent": agent, "task": "cheetah_dir_sparse", "seed": seed, "complete": True,
+                      "config": {"agent": agent}, "final": final}  # fmt: skip
+            (cell / "record.json").write_text(json.dumps(record))
+    lines = cross_task.task_table(tmp_path, ["stuck"], decimals=0, share=True, say=lambda _: None).splitlines()
+    assert lines[0] == "| agent | online return, seeds 0 / 1 / 2 | mean | solved | share (Wilson 95 %) | `stuck` |"
+    wilson = stats.binomtest(2, 3).proportion_ci(confidence_level=0.95, method="wilson")
+    share = f"0.67 ({wilson.low:.2f}–{wilson.high:.2f})"
+    assert lines[2] == f"| `oracle_rh` | 900 / 430 / 800 | 710 | 2 of 3 | {share} | 0.20 |"
+    assert lines[3] == "| `oracle` | -2 / -4 / — | -3 | 0 of 2 | 0.00 (0.00–0.66) | 0.00 |"
+    assert lines[4].startswith("| `task_aware` | 1 / — / — | 1 | 1 of 1 |")
+    without = cross_task.task_table(tmp_path, [], say=lambda _: None).splitlines()
+    assert without[0] == "| agent | online return, seeds 0 / 1 / 2 | mean | solved |"
+    assert without[2] == "| `oracle_rh` | 900.0 / 430.0 / 800.0 | 710.0 | 2 of 3 |"

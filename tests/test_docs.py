@@ -309,12 +309,18 @@ def test_results_pages_tables_are_what_page_table_prints_from_their_grids(page):
     for match in TASK_TABLE.finditer(page.read_text()):
         grid, *metrics = match.group("args").split()
         decimals = [int(m.split("=")[1]) for m in metrics if m.startswith("--decimals=")] or [1]
+        share = "--share" in metrics
         metrics = [m for m in metrics if not m.startswith("--")]
         assert (ROOT / grid / "cells").is_dir(), grid
-        table = task_table(ROOT / grid, metrics, decimals[0], say=lambda _: None)
+        table = task_table(ROOT / grid, metrics, decimals[0], share=share, say=lambda _: None)
         assert match.group("table") == table, (page.name, grid)
 
 
-def test_the_point_pages_hold_task_tables():
+def test_the_results_pages_hold_task_tables():
     marked = [p.name for p in RESULTS_PAGES if TASK_TABLE.search(p.read_text())]
-    assert {"point_treasure_sparse.md", "point_robot_sparse.md", "mountain_treasure_k8_sparse.md"} <= set(marked)
+    assert {
+        "point_treasure_sparse.md",
+        "point_robot_sparse.md",
+        "mountain_treasure_k8_sparse.md",
+        "cheetah_dir_sparse.md",
+    } <= set(marked)

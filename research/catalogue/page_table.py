@@ -4,7 +4,7 @@ mean, the seeds that solve the task and the means of the named final-deployment 
     .venv/bin/python research/catalogue/page_table.py docs/results/point_treasure_sparse \
         goal_reached last_episode_at_goal
 
-A page holds the table between `<!-- task-table: GRID METRIC ... [--decimals=N] -->` and
+A page holds the table between `<!-- task-table: GRID METRIC ... [--decimals=N] [--share] -->` and
 `<!-- /task-table -->`, blank lines around it; tests/test_docs.py checks that it is what this prints.
 """
 
@@ -22,8 +22,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("grid", type=Path, help="one task's grid (a folder with cells/)")
     parser.add_argument("metrics", nargs="*", help="final-deployment metrics to give the seeds' mean of")
     parser.add_argument("--decimals", type=int, default=1, help="decimals of the online returns")
+    parser.add_argument("--share", action="store_true", help="the solved seeds' share and its Wilson 95 %% interval")
     args = parser.parse_args(argv)
-    sys.stdout.write(task_table(args.grid, args.metrics, args.decimals, say=lambda m: print(m, file=sys.stderr)))
+    say = lambda m: print(m, file=sys.stderr)  # noqa: E731
+    sys.stdout.write(task_table(args.grid, args.metrics, args.decimals, share=args.share, say=say))
     return 0
 
 
