@@ -10,7 +10,7 @@
 # --frames). Each agent gets its own --out folder (OUT_<agent>), so agents run and merge independently;
 # rerunning the command resumes. Plain evaluation/run.py with the presets as they are, unless CONFIG names
 # an overrides file (one per-task setting, the same for every agent: --config CONFIG). A run with CONFIG
-# needs its own OUT.
+# needs its own OUT. PHYSICS_THREADS sets the cell's physics threads (1 where two runs share 2 cores).
 set -euo pipefail
 cd "$(dirname "$0")/../.."
 : "${TASK:?set TASK to a registered task}"
@@ -22,6 +22,7 @@ for agent in "${AGENT_LIST[@]}"; do
   EXTRA=()
   [ -f "$out/grid.json" ] && EXTRA+=(--resume)
   [ -n "${CONFIG:-}" ] && EXTRA+=(--config "$CONFIG")
+  [ -n "${PHYSICS_THREADS:-}" ] && EXTRA+=(--physics-threads "$PHYSICS_THREADS")
   echo "=== $agent on $TASK: start $(date -u +%FT%TZ) commit $(git rev-parse --short HEAD) config ${CONFIG:-none}"
   MUJOCO_GL=disable .venv/bin/python evaluation/run.py \
     --agents "$agent" --tasks "$TASK" --seeds "${SEED:-0}" \
