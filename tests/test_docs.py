@@ -324,3 +324,22 @@ def test_the_results_pages_hold_task_tables():
         "mountain_treasure_k8_sparse.md",
         "cheetah_dir_sparse.md",
     } <= set(marked)
+
+
+def test_page_table_update_rewrites_a_stale_table_from_its_grid(tmp_path):
+    """`research/catalogue/page_table.py --update PAGE` puts back what the grid gives in place of a stale
+    table, leaving the rest of the page as it was."""
+    page = ROOT / "docs" / "results" / "cheetah_dir_sparse.md"
+    text = page.read_text()
+    match = TASK_TABLE.search(text)
+    stale = text.replace(match.group("table"), match.group("table").replace("`hyperx`", "`hyperx` 0"), 1)
+    assert stale != text
+    copy = tmp_path / "page.md"
+    copy.write_text(stale)
+    proc = subprocess.run(
+        [sys.executable, str(ROOT / "research" / "catalogue" / "page_table.py"), "--update", str(copy)],
+        cwd=ROOT, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    assert "1 table(s) changed" in proc.stdout
+    assert copy.read_text() == text
