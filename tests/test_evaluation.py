@@ -960,10 +960,14 @@ def test_catalogue_log_rows_read_curve_wall_and_task_metrics_from_records(tmp_pa
         curve = [{"frames": 1_000_000 * (i + 1), "online_return": r, "wall_seconds": 60.0 * (i + 1)}
                  for i, r in enumerate((-5.0, 12.25))]  # fmt: skip
         final = {"exploration_metric_names": ["goal_reached"], "goal_reached": 0.5, "online_return": 12.25}
-        record = {"agent": name[0], "seed": int(name[-1]), "curve": curve, "final": final, "complete": complete}
+        record = {"agent": name[0], "task": "t", "seed": int(name[-1]), "curve": curve, "final": final,
+                  "complete": complete}  # fmt: skip
         (cell / "record.json").write_text(json.dumps(record))
     lines = module.markdown(module.cell_rows(tmp_path)).splitlines()
     assert lines[2] == "| a | 0 | 120 s | -5.0, **12.2** | `goal_reached` 0.5 |"
     assert lines[3] == "| b | 1 | 120 s (unfinished, 2,000,000 frames) | -5.0, **12.2** | `goal_reached` 0.5 |"
+    with_task = module.markdown(module.cell_rows(tmp_path), task=True).splitlines()
+    assert with_task[:2] == ["| task | agent | seed | wall | curve | final |", "|---|---|---|---|---|---|"]
+    assert with_task[2] == "| t " + lines[2]
     with pytest.raises(SystemExit, match="no cells"):
         module.cell_rows(tmp_path / "cells")

@@ -4,7 +4,7 @@ wall time, the online return at every evaluation point and the final deployment'
     .venv/bin/python research/catalogue/log_rows.py docs/results/calibration/rooms_sparse [more folders]
 
 Reads each folder's cells/*/record.json, finished or not (an unfinished cell is marked), and prints one
-Markdown table per folder.
+Markdown table per folder; `--task` adds the task column of the point grids' table.
 """
 
 from __future__ import annotations
@@ -33,15 +33,16 @@ def _number(value: float | None) -> str:
     return "—" if value is None else f"{value:,.2f}".rstrip("0").rstrip(".")
 
 
-def markdown(rows: list[dict]) -> str:
-    lines = ["| agent | seed | wall | curve | final |", "|---|---|---|---|---|"]
+def markdown(rows: list[dict], task: bool = False) -> str:
+    lines = ["| task " * task + "| agent | seed | wall | curve | final |", "|---" * task + "|---|---|---|---|---|"]
     for row in rows:
         curve = ", ".join(f"{v:,.1f}" for v in row["curve"][:-1])
         last = f"**{row['curve'][-1]:,.1f}**" if row["curve"] else ""
         final = ", ".join(f"`{name}` {_number(value)}" for name, value in row["final"].items())
         state = "" if row["complete"] else f" (unfinished, {row['frames']:,} frames)"
+        first = f"| {row['task']} " if task else ""
         lines.append(
-            f"| {row['agent']} | {row['seed']} | {row['wall_seconds'] or 0:,.0f} s{state} | "
+            f"{first}| {row['agent']} | {row['seed']} | {row['wall_seconds'] or 0:,.0f} s{state} | "
             f"{curve}{', ' if curve else ''}{last} | {final} |"
         )
     return "\n".join(lines)
@@ -50,9 +51,10 @@ def markdown(rows: list[dict]) -> str:
 def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("folders", type=Path, nargs="+", help="evaluation/run.py results folders")
+    parser.add_argument("--task", action="store_true", help="a task column first")
     args = parser.parse_args(argv)
     for folder in args.folders:
-        print(f"{folder}\n\n{markdown(cell_rows(folder))}\n")
+        print(f"{folder}\n\n{markdown(cell_rows(folder), task=args.task)}\n")
 
 
 if __name__ == "__main__":
