@@ -159,8 +159,9 @@ def task_table(grid: Path, metrics: list[str], decimals: int = 1, share: bool = 
         if success:
             row.append(f"{sum(bool(success(f)) for f in finals)} of {len(finals)}")
             if share:
-                s = success_share([{"final": f} for f in finals], success)
-                row.append(f"{s['success_share']:.2f} ({s['success_ci95_low']:.2f}–{s['success_ci95_high']:.2f})")
+                solved = success_share([{"final": f} for f in finals], success)
+                low, high = solved["success_ci95_low"], solved["success_ci95_high"]
+                row.append(f"{solved['success_share']:.2f} ({low:.2f}–{high:.2f})")
         for m in metrics:
             values = [f[m] for f in finals if f.get(m) is not None]
             row.append(f"{np.mean(values):.2f}" if values else "—")
