@@ -100,6 +100,7 @@ def results_table(grids: list[Path], agents: list[str] | None = None, link: str 
     for tasks that declare a success criterion (`suite.register(..., success=)`), the seeds that meet it
     (`solved k/n`). `link` (e.g. "docs/results/{task}.md") makes each task name a link."""
     from hyperstate.agents import GRID_PRESETS
+    from hyperstate.evaluation.report import success_share  # imports the suite: only where a table is made
 
     cells = finished_cells(grids, say)
     present = {a for per_task in cells.values() for a in per_task}
@@ -120,7 +121,7 @@ def results_table(grids: list[Path], agents: list[str] | None = None, link: str 
                 entries.append("—")
                 continue
             mean = float(np.mean([f["online_return"] for f in finals]))
-            solved = f" (solved {sum(bool(success(f)) for f in finals)}/{len(finals)})" if success else ""
+            solved = f" (solved {success_share(finals, success)['success_seeds']}/{len(finals)})" if success else ""
             entries.append(f"{round(mean) or 0:,}{solved}")  # `or 0`: no "-0" for a mean in (-0.5, 0)
         name = f"[`{task}`]({link.format(task=task)})" if link else f"`{task}`"
         lines.append(f"| {name} | " + " | ".join(entries) + " |")
@@ -157,9 +158,9 @@ def task_table(grid: Path, metrics: list[str], decimals: int = 1, share: bool = 
         row = [f"`{agent}`", " / ".join("—" if f is None else f"{f['online_return']:,.{decimals}f}" for f in by_seed),
                f"{mean_return(agent):,.{decimals}f}"]  # fmt: skip
         if success:
-            row.append(f"{sum(bool(success(f)) for f in finals)} of {len(finals)}")
+            solved = success_share(finals, success)
+            row.append(f"{solved['success_seeds']} of {len(finals)}")
             if share:
-                solved = success_share([{"final": f} for f in finals], success)
                 low, high = solved["success_ci95_low"], solved["success_ci95_high"]
                 row.append(f"{solved['success_share']:.2f} ({low:.2f}–{high:.2f})")
         for m in metrics:

@@ -83,7 +83,7 @@ def summary_rows(records: list[dict]) -> list[dict]:
             "adaptive_reference_return": float(np.mean(adaptive)) if adaptive else None,
             "final_coverage": float(np.mean(coverage)) if coverage else None,
         }
-        row.update(success_share(cell, suite.success(task)))
+        row.update(success_share([r["final"] for r in cell], suite.success(task)))
         for metric in METRICS + _task_metric_names(cell):
             values = [r["final"].get(metric) for r in cell if r["final"].get(metric) is not None]
             row[metric] = float(np.mean(values)) if values else None
@@ -91,18 +91,18 @@ def summary_rows(records: list[dict]) -> list[dict]:
     return rows
 
 
-def success_share(cell: list[dict], success) -> dict:
-    """The share of seeds that solved the task (its `suite.register(..., success=)` criterion) and its
-    Wilson 95 % interval; empty for tasks without a criterion."""
+def success_share(finals: list[dict], success) -> dict:
+    """Of the seeds' final deployments, how many solved the task (its `suite.register(..., success=)`
+    criterion), their share and its Wilson 95 % interval; empty for tasks without a criterion."""
     if success is None:
         return {}
     from scipy.stats import binomtest
 
-    solved = sum(bool(success(r["final"])) for r in cell)
-    interval = binomtest(solved, len(cell)).proportion_ci(confidence_level=0.95, method="wilson")
+    solved = sum(bool(success(f)) for f in finals)
+    interval = binomtest(solved, len(finals)).proportion_ci(confidence_level=0.95, method="wilson")
     return {
         "success_seeds": solved,
-        "success_share": solved / len(cell),
+        "success_share": solved / len(finals),
         "success_ci95_low": float(interval.low),
         "success_ci95_high": float(interval.high),
     }
