@@ -11,14 +11,12 @@
 set -u
 cd "$(dirname "$0")/../.."
 TASK=${1:?usage: point_grids.sh point_robot_sparse|point_treasure_sparse}
-# The parts not yet in docs/results/<task>/ (the merged ones: point_robot_sparse main_s12, task_aware and
-# hyperx_icml seed 0; point_treasure_sparse main_s12, ta_rs and varibad_rh). A worktree that still holds
-# the lanes' runs resumes them with its own lane scripts instead; a fresh one runs these.
+# The parts not yet in docs/results/<task>/ (merged: every agent's seeds 0-2 but rl2 seed 2 and
+# task_supervised, on both tasks; rl2 seeds 0-1). A worktree that still holds the lanes' runs resumes
+# them with its own lane scripts instead; a fresh one runs these.
 case "$TASK" in
-  point_robot_sparse)
-    PARTS=("hyperx_icml_s12|hyperx_icml|1 2" "rl2|rl2|0 1 2" "task_supervised|task_supervised|0 1 2") ;;
-  point_treasure_sparse)
-    PARTS=("varibad_only|varibad|0 1 2" "rl2|rl2|0 1 2" "task_supervised|task_supervised|0 1 2") ;;
+  point_robot_sparse|point_treasure_sparse)
+    PARTS=("rl2_s2|rl2|2" "task_supervised|task_supervised|0 1 2") ;;
   *) echo "point_grids.sh: unknown task $TASK" >&2; exit 2 ;;
 esac
 for part in "${PARTS[@]}"; do
