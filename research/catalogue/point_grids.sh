@@ -6,8 +6,8 @@
 #   nohup setsid bash research/catalogue/point_grids.sh point_robot_sparse >> runs/logs/laneA.log 2>&1 < /dev/null &
 #   nohup setsid bash research/catalogue/point_grids.sh point_treasure_sparse >> runs/logs/laneB.log 2>&1 < /dev/null &
 #
-# Seed 0 of the first part's agents is the calibration's (docs/results/calibration/<task>/), so that part
-# runs seeds 1 and 2; the evaluation points are the calibration's (every 1M frames).
+# The evaluation points are the calibration's (every 1M frames), whose seed-0 cells the grids merge
+# (docs/results/calibration/<task>/).
 set -u
 cd "$(dirname "$0")/../.."
 TASK=${1:?usage: point_grids.sh point_robot_sparse|point_treasure_sparse}
