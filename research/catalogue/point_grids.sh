@@ -11,9 +11,8 @@
 set -u
 cd "$(dirname "$0")/../.."
 TASK=${1:?usage: point_grids.sh point_robot_sparse|point_treasure_sparse}
-# The parts not yet in docs/results/<task>/ (merged: every agent's seeds 0-2 but rl2 seed 2 and
-# task_supervised, on both tasks; rl2 seeds 0-1). A worktree that still holds the lanes' runs resumes
-# them with its own lane scripts instead; a fresh one runs these.
+# The grids are complete: every part is merged into docs/results/<task>/. These are the last parts to
+# finish (rl2 seed 2 and task_supervised, on both tasks); running them again reproduces those cells.
 case "$TASK" in
   point_robot_sparse|point_treasure_sparse)
     PARTS=("rl2_s2|rl2|2" "task_supervised|task_supervised|0 1 2") ;;
