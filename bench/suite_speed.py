@@ -1,6 +1,6 @@
 """Control steps per second of every registered task: `suite.batch` against raw MuJoCo of the same model.
 
-    python bench/suite_speed.py [--tasks NAME ...] [--num-envs 16] [--threads 2] [--steps 20000]
+    python bench/suite_speed.py [--tasks NAME ...] [--num-envs 16] [--threads N] [--steps 20000]
                                 [--out bench/results/suite_speed.json]
 
 For each task, one run measures `suite.batch(task, N, num_threads=T)` and a raw `mujoco.batch.Batch`

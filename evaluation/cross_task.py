@@ -379,7 +379,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--low-agent", default="varibad", help="the agent each task's score 0 is (mean)")
     parser.add_argument("--high-agent", default="task_aware", help="the agent each task's score 1 is (mean)")
     parser.add_argument("--agents", nargs="+", default=None, help="agents to report (default: all)")
-    parser.add_argument("--pairs", nargs="+", type=_pair, default=None, help="X:Y, P(X > Y) (default: %(default)s)")
+    pairs_help = f"X:Y, P(X > Y) (default: {' '.join(DEFAULT_PAIRS)})"
+    parser.add_argument("--pairs", nargs="+", type=_pair, default=None, help=pairs_help)
     parser.add_argument("--reps", type=int, default=2000, help="bootstrap replications")
     parser.add_argument("--seed", type=int, default=0, help="the bootstrap's seed")
     parser.add_argument("--table", type=Path, default=None, help="also write the tasks × agents Markdown table here")

@@ -1,7 +1,7 @@
 """The public task registry: `register`, `load`, `batch`, `list_tasks`.
 
 A task is a factory `factory(seed=None, **kwargs) -> control.Environment`. It may come with a batched
-simulator factory `batch_factory(num_envs, seed=None, **kwargs) -> BatchEnv` (same kwargs); tasks
+simulator factory `batch_factory(num_envs, seed=None, num_threads=0, **kwargs) -> BatchEnv` (same kwargs); tasks
 without one are batched by `LoopBatch`, which steps dm_control environments one by one.
 
 What the evaluation harness knows of a task it learns here, from what the task declares: its
