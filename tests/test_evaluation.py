@@ -901,6 +901,29 @@ def test_the_catalogue_script_runs_the_issues_agents_and_the_oracles_where_the_t
     assert built == expected and all(o == {} for o in overrides.values())
 
 
+def test_a_catalogue_lane_runs_its_parts_in_order_each_in_its_own_folder_evaluated_every_1m_frames():
+    """research/catalogue/lane.sh: one reproduce_catalogue.sh call per "AGENTS|SEEDS" part, in order, each
+    its own OUT under runs/<task>/, with the calibrations' evaluation points (so their seed-0 cells merge);
+    a malformed part is refused before anything runs."""
+    env = {k: v for k, v in os.environ.items() if k not in ("AGENTS", "SEEDS", "CONFIG", "EVAL_EVERY")}
+    lane = ["bash", str(ROOT / "research" / "catalogue" / "lane.sh"), "rooms_sparse", "5e7"]
+    proc = subprocess.run([*lane, "oracle_rh|1 2", "hyperx varibad|0"],
+                          capture_output=True, text=True, env={**env, "DRY_RUN": "1"}, timeout=300)  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    calls = [line.split() for line in proc.stdout.splitlines() if "evaluation/run.py" in line]
+    assert len(calls) == 2
+    for args, names, seeds, out in (
+        (calls[0], ["oracle_rh"], ["1", "2"], "runs/rooms_sparse/oracle_rh_s12"),
+        (calls[1], ["hyperx", "varibad"], ["0"], "runs/rooms_sparse/hyperx+varibad_s0"),
+    ):
+        assert args[args.index("--agents") + 1 : args.index("--tasks")] == names
+        assert args[args.index("--seeds") + 1 : args.index("--frames")] == seeds
+        assert args[args.index("--frames") + 1] == "5e7" and args[args.index("--eval-every") + 1] == "1000000"
+        assert args[args.index("--out") + 1] == out
+    bad = subprocess.run([*lane, "oracle_rh"], capture_output=True, text=True, env=env, timeout=60)
+    assert bad.returncode == 2 and "AGENTS|SEEDS" in bad.stderr and "evaluation/run.py" not in bad.stdout
+
+
 def test_the_catalogue_script_trains_and_deploys_both_ways(tmp_path, tiny_config):
     """A tiny run of scripts/reproduce_catalogue.sh: each record holds the deterministic and the sampled
     deployment on the held-out tasks (--eval-tasks 20: all 48 of Rooms' finite prior, each once)."""
