@@ -922,6 +922,9 @@ def test_a_catalogue_lane_runs_its_parts_in_order_each_in_its_own_folder_evaluat
         assert args[args.index("--out") + 1] == out
     bad = subprocess.run([*lane, "oracle_rh"], capture_output=True, text=True, env=env, timeout=60)
     assert bad.returncode == 2 and "AGENTS|SEEDS" in bad.stderr and "evaluation/run.py" not in bad.stdout
+    # A part that fails (an unknown agent: evaluation/run.py exits 2) is logged with its exit status.
+    failed = subprocess.run([*lane, "no_such_agent|0"], capture_output=True, text=True, env=env, timeout=300)
+    assert "end rooms_sparse runs/rooms_sparse/no_such_agent_s0 rc=2" in failed.stdout, failed.stderr[-2000:]
 
 
 def test_the_catalogue_script_trains_and_deploys_both_ways(tmp_path, tiny_config):

@@ -25,5 +25,6 @@ for part in "$@"; do
   echo "### $(date -u +%FT%TZ) start $TASK $out: $agents, seeds $seeds, $FRAMES frames, commit $(git rev-parse --short HEAD)"
   EVAL_EVERY=${EVAL_EVERY:-1000000} PHYSICS_THREADS=${PHYSICS_THREADS:-1} AGENTS="$agents" SEEDS="$seeds" \
     bash scripts/reproduce_catalogue.sh "$TASK" "$FRAMES" "$out"
-  echo "### $(date -u +%FT%TZ) end $TASK $out rc=$?"
+  rc=$?  # before the echo's $(date), which resets $?
+  echo "### $(date -u +%FT%TZ) end $TASK $out rc=$rc"
 done

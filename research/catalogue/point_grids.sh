@@ -23,5 +23,6 @@ for part in "${PARTS[@]}"; do
   echo "### $(date -u +%FT%TZ) start $TASK $out: $agents, seeds $seeds, commit $(git rev-parse --short HEAD)"
   EVAL_EVERY=1000000 PHYSICS_THREADS=1 AGENTS="$agents" SEEDS="$seeds" \
     bash scripts/reproduce_catalogue.sh "$TASK" 2e7 "runs/$TASK/$out"
-  echo "### $(date -u +%FT%TZ) end $TASK $out rc=$?"
+  rc=$?  # before the echo's $(date), which resets $?
+  echo "### $(date -u +%FT%TZ) end $TASK $out rc=$rc"
 done
