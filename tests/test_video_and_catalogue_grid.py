@@ -16,21 +16,32 @@ ROOT = Path(__file__).resolve().parents[1]
 TINY = {"ppo.num_envs": 4, "ppo.rollout_length": 50, "vae.batch_trajectories": 2, "vae.subsample_elbos": 10}
 
 
-def test_grid_skips_incompatible_pairs_reports_task_metrics_and_renders_videos(tmp_path):
+def run_grid(tmp_path: Path, *args: object) -> subprocess.CompletedProcess:
     config = tmp_path / "tiny.toml"
     config.write_text("[all]\n" + "".join(f'"{k}" = {v}\n' for k, v in TINY.items()))
-    out = tmp_path / "out"
-    args = ["--agents", "oracle", "hyperx", "--tasks", "point_robot_sparse", "point_treasure_sparse"]
-    args += ["--seeds", "0", "--frames", "400", "--eval-tasks", "2", "--no-reference", "--workers", "1"]
-    args += ["--no-progress", "--video", "--video-tasks", "2", "--config", config, "--out", out]
+    common = ["--seeds", "0", "--frames", "400", "--eval-tasks", "2", "--no-reference", "--workers", "1"]
     env = {**os.environ, "MUJOCO_GL": "disable"}  # training without rendering; --video switches to egl
-    result = subprocess.run(
-        [sys.executable, str(ROOT / "evaluation" / "run.py"), *map(str, args)],
+    return subprocess.run(
+        [
+            sys.executable,
+            str(ROOT / "evaluation" / "run.py"),
+            *common,
+            "--no-progress",
+            "--config",
+            str(config),
+            *map(str, args),
+        ],
         capture_output=True,
         text=True,
         env=env,
         timeout=600,
     )
+
+
+def test_grid_skips_incompatible_pairs_and_reports_task_metrics(tmp_path):
+    out = tmp_path / "out"
+    tasks = ["point_robot_sparse", "point_treasure_sparse"]
+    result = run_grid(tmp_path, "--agents", "oracle", "hyperx", "--tasks", *tasks, "--out", out)
     assert result.returncode == 0, result.stderr
     assert "skipping oracle on point_robot_sparse: the oracle belief needs a task with an exact belief" in result.stderr
     cells = sorted(p.name for p in (out / "cells").iterdir())
@@ -48,11 +59,29 @@ def test_grid_skips_incompatible_pairs_reports_task_metrics_and_renders_videos(t
     }
     for row in rows.values():  # the point robot's own metrics reach the summary
         assert 0.0 <= float(row["goal_reached"]) <= 1.0 and 0.0 <= float(row["last_episode_at_goal"]) <= 1.0
+    assert not (out / "videos").exists()  # only --video renders
 
+
+def test_video_renders_each_cells_deployments_with_caption_and_goal(tmp_path):
+    # One cell: software rendering costs ~50 ms a frame on 2 cores, and every cell's video is the same code.
+    out = tmp_path / "out"
+    result = run_grid(
+        tmp_path,
+        "--agents",
+        "oracle",
+        "--tasks",
+        "point_treasure_sparse",
+        "--video",
+        "--video-tasks",
+        "2",
+        "--out",
+        out,
+    )
+    assert result.returncode == 0, result.stderr
     import imageio_ffmpeg
 
     videos = sorted(p.name for p in (out / "videos").iterdir())
-    assert videos == [c + ".mp4" for c in cells]
+    assert videos == ["oracle__point_treasure_sparse__s0.mp4"]
     reader = imageio_ffmpeg.read_frames(str(out / "videos" / "oracle__point_treasure_sparse__s0.mp4"))
     meta = next(reader)
     frames = np.stack([np.frombuffer(f, np.uint8).reshape(240, 320, 3) for f in reader])
