@@ -46,7 +46,7 @@ zoo: $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m ruff check .
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2 --dist worksteal  # two workers: training in tests runs on one thread
 	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir build/site  # not --quiet: it hides the warnings strict fails on
 
 bench: $(STAMP)

@@ -43,17 +43,22 @@ PARAMETER_SEED = 0
 
 
 def machine_key() -> str:
-    """The processor's model name and the vector units torch and numpy dispatch to: runs agree bit for bit
-    only where all match (another instruction set rounds floats differently)."""
-    model = platform.processor() or platform.machine()
+    """The processor (model name, and family, model and stepping: one model name covers several
+    generations, which round floats differently) and the vector units torch and numpy dispatch to: runs
+    agree bit for bit only where all match."""
+    first = {}  # the first processor's block of /proc/cpuinfo
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             key, _, value = line.partition(":")
-            if key.strip() == "model name" and value.strip():
-                model = value.strip()
+            if not key.strip() and first:
                 break
+            first.setdefault(key.strip(), value.strip())
     except OSError:
         pass
+    model = first.get("model name") or platform.processor() or platform.machine()
+    cpuid = ", ".join(f"{k} {first[k]}" for k in ("cpu family", "model", "stepping") if first.get(k))
+    if cpuid:
+        model += f" ({cpuid})"
     try:
         umath = np._core._multiarray_umath
         simd = " ".join(t for t in umath.__cpu_dispatch__ if umath.__cpu_features__.get(t))

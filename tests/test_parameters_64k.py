@@ -2,9 +2,9 @@
 
 tests/data/parameters_64k.json was written by `scripts/bit_identity.py parameters` on 6fa8130 (the commit
 before the refactor), one entry per machine: per module-state value its shape, dtype, SHA-256, sum and norm,
-and every iteration's log. Floats depend on the processor's vector units, so:
-- on a machine with an entry (same model name and torch/numpy vector units), every value's bytes and every
-  log number must be equal: training is bit-identical;
+and every iteration's log. Floats depend on the processor and its vector units, so:
+- on a machine with an entry (same model name, cpu family, model and stepping, and torch/numpy vector
+  units), every value's bytes and every log number must be equal: training is bit-identical;
 - elsewhere the run is compared with an entry for what does not depend on rounding (the module states'
   names, shapes and dtypes, their integer and scalar values, the log's fields and frames) and for scale only
   (the median relative difference of the float values' norms is under 5 %: a rounding difference gives about
