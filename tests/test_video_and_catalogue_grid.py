@@ -16,32 +16,19 @@ ROOT = Path(__file__).resolve().parents[1]
 TINY = {"ppo.num_envs": 4, "ppo.rollout_length": 50, "vae.batch_trajectories": 2, "vae.subsample_elbos": 10}
 
 
-def run_grid(tmp_path: Path, *args: object) -> subprocess.CompletedProcess:
+def run_grid(tmp_path: Path, args: str, out: Path) -> subprocess.CompletedProcess:
+    """evaluation/run.py on one seed, 400 frames, 2 held-out tasks, with the tiny config."""
     config = tmp_path / "tiny.toml"
     config.write_text("[all]\n" + "".join(f'"{k}" = {v}\n' for k, v in TINY.items()))
-    common = ["--seeds", "0", "--frames", "400", "--eval-tasks", "2", "--no-reference", "--workers", "1"]
+    common = f"--seeds 0 --frames 400 --eval-tasks 2 --no-reference --workers 1 --no-progress --config {config}"
     env = {**os.environ, "MUJOCO_GL": "disable"}  # training without rendering; --video switches to egl
-    return subprocess.run(
-        [
-            sys.executable,
-            str(ROOT / "evaluation" / "run.py"),
-            *common,
-            "--no-progress",
-            "--config",
-            str(config),
-            *map(str, args),
-        ],
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=600,
-    )
+    command = [sys.executable, str(ROOT / "evaluation" / "run.py"), *common.split(), *args.split(), "--out", str(out)]
+    return subprocess.run(command, capture_output=True, text=True, env=env, timeout=600)
 
 
 def test_grid_skips_incompatible_pairs_and_reports_task_metrics(tmp_path):
     out = tmp_path / "out"
-    tasks = ["point_robot_sparse", "point_treasure_sparse"]
-    result = run_grid(tmp_path, "--agents", "oracle", "hyperx", "--tasks", *tasks, "--out", out)
+    result = run_grid(tmp_path, "--agents oracle hyperx --tasks point_robot_sparse point_treasure_sparse", out)
     assert result.returncode == 0, result.stderr
     assert "skipping oracle on point_robot_sparse: the oracle belief needs a task with an exact belief" in result.stderr
     cells = sorted(p.name for p in (out / "cells").iterdir())
@@ -65,18 +52,7 @@ def test_grid_skips_incompatible_pairs_and_reports_task_metrics(tmp_path):
 def test_video_renders_each_cells_deployments_with_caption_and_goal(tmp_path):
     # One cell: software rendering costs ~50 ms a frame on 2 cores, and every cell's video is the same code.
     out = tmp_path / "out"
-    result = run_grid(
-        tmp_path,
-        "--agents",
-        "oracle",
-        "--tasks",
-        "point_treasure_sparse",
-        "--video",
-        "--video-tasks",
-        "2",
-        "--out",
-        out,
-    )
+    result = run_grid(tmp_path, "--agents oracle --tasks point_treasure_sparse --video --video-tasks 2", out)
     assert result.returncode == 0, result.stderr
     import imageio_ffmpeg
 
