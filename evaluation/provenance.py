@@ -22,6 +22,7 @@ def versions() -> dict:
             out[package] = None
     out["git_commit"] = git_commit()
     out["cpu"] = cpu_description()
+    out["cpu_id"] = cpu_identification()
     return out
 
 
@@ -82,3 +83,23 @@ def cpu_description() -> str:
         pass
     vector = next((f for f in ("avx512f", "avx2", "avx", "neon", "asimd") if f in flags), None)
     return f"{model} ({vector})" if vector else model
+
+
+def cpu_identification(cpuinfo: str | None = None) -> str | None:
+    """The first processor's family, model and stepping ("family 25, model 17, stepping 1") in the text
+    `cpuinfo` (default: /proc/cpuinfo): one model name covers several generations, which can round floats
+    differently. None where the text has none."""
+    if cpuinfo is None:
+        try:
+            cpuinfo = Path("/proc/cpuinfo").read_text()
+        except OSError:
+            return None
+    first: dict[str, str] = {}
+    for line in cpuinfo.splitlines():
+        key, _, value = line.partition(":")
+        if not key.strip() and first:
+            break  # the end of the first processor's block
+        first.setdefault(key.strip(), value.strip())
+    names = {"cpu family": "family", "model": "model", "stepping": "stepping"}
+    parts = [f"{short} {first[key]}" for key, short in names.items() if first.get(key)]
+    return ", ".join(parts) or None

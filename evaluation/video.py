@@ -143,6 +143,11 @@ def _render_one(agent, task: str, env, writer, width: int, height: int) -> tuple
     return total, frames
 
 
+def default_cells(grid: dict) -> list[str]:
+    """The cells filmed when none are named: the first seed of every (agent, task) of a grid.json."""
+    return [grid_layout.cell_id(a, t, grid["seeds"][0]) for t in grid["tasks"] for a in grid["agents"]]
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
@@ -174,7 +179,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     grid = json.loads(grid_file.read_text())
     import_modules(args.imports)
-    cells = args.cells or [grid_layout.cell_id(a, t, grid["seeds"][0]) for t in grid["tasks"] for a in grid["agents"]]
+    cells = args.cells or default_cells(grid)
     for cell in cells:
         saved = grid_layout.cell_dir(args.out, cell) / grid_layout.AGENT
         if not saved.exists():

@@ -15,7 +15,7 @@ import tomllib
 
 from hyperstate import agents, suite
 from hyperstate.agents import serialization
-from hyperstate.evaluation import report
+from hyperstate.evaluation import provenance, report
 from hyperstate.evaluation.deploy import deploy, deployment_metrics, evaluation_tasks
 from hyperstate.evaluation.stats import bootstrap_ci, iqm
 from hyperstate.suite.cheetah_dir import BACKWARD, FORWARD
@@ -137,6 +137,7 @@ def test_grid_writes_the_results_contract(tmp_path, tiny_config):
         assert final["online_return"] == pytest.approx(r["curve"][-1]["online_return"])
         assert {"left_zone", "first_exit_step", "correct_direction", "stuck", "distance_correct"} <= set(final)
         assert r["versions"]["mujoco"] == "3.17.0" and r["versions"]["cpu"]  # floats depend on the CPU
+        assert r["versions"]["cpu_id"] == provenance.cpu_identification()
         assert {"probe_kl", "probe_kl_after", "informed_fraction"} <= set(final)
         assert all(0.0 < p["coverage"] <= 1.0 for p in r["curve"])
         # The task-aware reference learns the dense counterpart; every agent is deployed on the task.
@@ -997,3 +998,13 @@ def test_catalogue_log_rows_read_curve_wall_and_task_metrics_from_records(tmp_pa
     assert with_task[2] == "| t " + lines[2]
     with pytest.raises(SystemExit, match="no cells"):
         module.cell_rows(tmp_path / "cells")
+
+
+def test_cpu_identification_reads_the_first_processors_block():
+    cpuinfo = (
+        "processor\t: 0\nvendor_id\t: AuthenticAMD\ncpu family\t: 25\nmodel\t\t: 17\n"
+        "model name\t: AMD EPYC\nstepping\t: 1\n\nprocessor\t: 1\ncpu family\t: 23\nmodel\t\t: 49\n"
+    )
+    assert provenance.cpu_identification(cpuinfo) == "family 25, model 17, stepping 1"
+    assert provenance.cpu_identification("processor\t: 0\nmodel\t\t: 85\n") == "model 85"
+    assert provenance.cpu_identification("Processor\t: ARMv8\n") is None

@@ -2,6 +2,7 @@
 videos rendered (MUJOCO_GL=egl), bonuses on the task's declared position keys."""
 
 import csv
+import json
 import os
 import subprocess
 import sys
@@ -47,6 +48,16 @@ def test_grid_skips_incompatible_pairs_and_reports_task_metrics(tmp_path):
     for row in rows.values():  # the point robot's own metrics reach the summary
         assert 0.0 <= float(row["goal_reached"]) <= 1.0 and 0.0 <= float(row["last_episode_at_goal"]) <= 1.0
     assert not (out / "videos").exists()  # only --video renders
+    # Which cells a video is made of by default: the first seed of each (agent, task), task by task.
+    from hyperstate.evaluation import video
+
+    grid = json.loads((out / "grid.json").read_text())
+    assert video.default_cells({**grid, "seeds": [3, 5]}) == [
+        "oracle__point_robot_sparse__s3",
+        "hyperx__point_robot_sparse__s3",
+        "oracle__point_treasure_sparse__s3",
+        "hyperx__point_treasure_sparse__s3",
+    ]
 
 
 def test_video_renders_each_cells_deployments_with_caption_and_goal(tmp_path):
