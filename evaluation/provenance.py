@@ -69,18 +69,9 @@ def read_commands(path: Path) -> list[str]:
 
 def cpu_description() -> str:
     """The processor and its widest vector unit: a run's floats, and so its learning curve, depend on them."""
-    model, flags = platform.processor() or platform.machine(), set()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            key, _, value = line.partition(":")
-            if key.strip() == "model name" and value.strip():
-                model = value.strip()
-            elif key.strip() == "flags":
-                flags = set(value.split())
-            if flags and model:
-                break
-    except OSError:
-        pass
+    first = _first_processor()
+    model = first.get("model name") or platform.processor() or platform.machine()
+    flags = set(first.get("flags", "").split())
     vector = next((f for f in ("avx512f", "avx2", "avx", "neon", "asimd") if f in flags), None)
     return f"{model} ({vector})" if vector else model
 
@@ -89,17 +80,23 @@ def cpu_identification(cpuinfo: str | None = None) -> str | None:
     """The first processor's family, model and stepping ("family 25, model 17, stepping 1") in the text
     `cpuinfo` (default: /proc/cpuinfo): one model name covers several generations, which can round floats
     differently. None where the text has none."""
+    first = _first_processor(cpuinfo)
+    names = {"cpu family": "family", "model": "model", "stepping": "stepping"}
+    parts = [f"{short} {first[key]}" for key, short in names.items() if first.get(key)]
+    return ", ".join(parts) or None
+
+
+def _first_processor(cpuinfo: str | None = None) -> dict[str, str]:
+    """The first processor's block of `cpuinfo` (default: /proc/cpuinfo; empty where it cannot be read)."""
     if cpuinfo is None:
         try:
             cpuinfo = Path("/proc/cpuinfo").read_text()
         except OSError:
-            return None
+            return {}
     first: dict[str, str] = {}
     for line in cpuinfo.splitlines():
         key, _, value = line.partition(":")
         if not key.strip() and first:
             break  # the end of the first processor's block
         first.setdefault(key.strip(), value.strip())
-    names = {"cpu family": "family", "model": "model", "stepping": "stepping"}
-    parts = [f"{short} {first[key]}" for key, short in names.items() if first.get(key)]
-    return ", ".join(parts) or None
+    return first
